@@ -1,0 +1,1 @@
+"""The autopilot: commander, navigator, controller, mixer, ground-station endpoint."""

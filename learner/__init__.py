@@ -1,0 +1,1 @@
+"""Learning the ground effect: datasets, the network, offline and online training, diagnosis."""

@@ -1,0 +1,1 @@
+"""Missions and the groundfx command line."""

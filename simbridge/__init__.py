@@ -1,0 +1,1 @@
+"""The simulated vehicle: parameters, PyBullet world, physical effects, the HIL link."""

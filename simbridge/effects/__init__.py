@@ -1,0 +1,78 @@
+"""The catalogue of physical effects, chosen by name in the world YAML.
+
+Each effect is a frozen parameter dataclass (fields with units and ranges) and pure functions
+in its module. The simulator composes them; the sim-to-real diagnosis fits the same ones.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any
+
+from simbridge.config import ConfigError, build
+from simbridge.effects.actuators import MassErrorParams, MotorLagParams, ThrustCoefficientParams
+from simbridge.effects.drag import BodyDragParams, RotorDragParams, WindParams
+from simbridge.effects.ground import CeilingEffectParams, GroundEffectParams
+from simbridge.effects.proximity import WallEffectParams
+from simbridge.effects.sensor_errors import SensorBiasParams, SensorLatencyParams
+
+
+@dataclass(frozen=True)
+class EffectSet:
+    """The enabled effects of one world; None means the effect is absent."""
+
+    ground_effect: GroundEffectParams | None = None
+    ceiling_effect: CeilingEffectParams | None = None
+    wall_effect: WallEffectParams | None = None
+    rotor_drag: RotorDragParams | None = None
+    body_drag: BodyDragParams | None = None
+    wind: WindParams | None = None
+    motor_lag: MotorLagParams | None = None
+    thrust_coefficient: ThrustCoefficientParams | None = None
+    mass_error: MassErrorParams | None = None
+    sensor_latency: SensorLatencyParams | None = None
+    sensor_bias: SensorBiasParams | None = None
+
+    def names(self) -> list[str]:
+        return [f.name for f in fields(self) if getattr(self, f.name) is not None]
+
+
+PARAMS_BY_NAME: dict[str, type] = {
+    "ground_effect": GroundEffectParams,
+    "ceiling_effect": CeilingEffectParams,
+    "wall_effect": WallEffectParams,
+    "rotor_drag": RotorDragParams,
+    "body_drag": BodyDragParams,
+    "wind": WindParams,
+    "motor_lag": MotorLagParams,
+    "thrust_coefficient": ThrustCoefficientParams,
+    "mass_error": MassErrorParams,
+    "sensor_latency": SensorLatencyParams,
+    "sensor_bias": SensorBiasParams,
+}
+
+
+def parse_effects(entries: Any, where: str) -> EffectSet:
+    """A YAML list of `{name: ..., <params>}` mappings into an EffectSet."""
+    if entries is None:
+        return EffectSet()
+    if not isinstance(entries, list):
+        raise ConfigError(f"{where}: expected a list of effects, got {entries!r}")
+    chosen: dict[str, Any] = {}
+    for i, entry in enumerate(entries):
+        at = f"{where}[{i}]"
+        if not isinstance(entry, dict) or "name" not in entry:
+            raise ConfigError(f"{at}: expected a mapping with a 'name', got {entry!r}")
+        name = entry["name"]
+        if name not in PARAMS_BY_NAME:
+            raise ConfigError(
+                f"{at}.name: unknown effect {name!r}; known: {', '.join(PARAMS_BY_NAME)}"
+            )
+        if name in chosen:
+            raise ConfigError(f"{at}.name: effect {name!r} is listed twice")
+        params = {k: v for k, v in entry.items() if k != "name"}
+        chosen[name] = build(PARAMS_BY_NAME[name], params, f"{at} ({name})")
+    effects = EffectSet(**chosen)
+    if effects.wind is not None and effects.rotor_drag is None and effects.body_drag is None:
+        raise ConfigError(f"{where}: wind acts only through drag; add rotor_drag or body_drag")
+    return effects

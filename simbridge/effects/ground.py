@@ -1,0 +1,101 @@
+"""Ground and ceiling effect: thesis equations 2.13 and 3.4, per rotor.
+
+    f_ge = C_T n^2 (1 / (1 - rho (R / 4z)^2) - 1)
+
+z is the rotor's height above the surface actually below it (a ray in the simulator), held at
+the cut-off height below it: the smallest two-decimal value above the singular point
+z* = R sqrt(rho) / 4 (thesis section 3.3.1; 0.02 m for rho = 1 and 2).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from simbridge.config import param
+
+
+def singular_height_m(rho: float, rotor_radius_m: float) -> float:
+    """The height z* at which equation 3.4 goes to infinity."""
+    return rotor_radius_m * math.sqrt(rho) / 4.0
+
+
+def cutoff_height_m(rho: float, rotor_radius_m: float) -> float:
+    """The smallest two-decimal height strictly above the singular point."""
+    return (math.floor(singular_height_m(rho, rotor_radius_m) * 100.0 + 1e-9) + 1.0) / 100.0
+
+
+def resolve_cutoff_m(rho: float, cutoff_m: float | None, rotor_radius_m: float) -> float:
+    """The thesis's cut-off rule, or a given cut-off, which must clear the singular point."""
+    if cutoff_m is None:
+        return cutoff_height_m(rho, rotor_radius_m)
+    singular = singular_height_m(rho, rotor_radius_m)
+    if cutoff_m <= singular:
+        raise ValueError(
+            f"cutoff_m {cutoff_m:g} must be above the singular height {singular:.4f} m"
+        )
+    return cutoff_m
+
+
+def thrust_gain(height_m: float, rho: float, rotor_radius_m: float, cutoff_m: float) -> float:
+    """f_ge / f_rotor of equation 3.4; constant below the cut-off, 0 when nothing is below."""
+    if height_m == math.inf:
+        return 0.0
+    z = height_m if height_m > cutoff_m else cutoff_m
+    r = rotor_radius_m / (4.0 * z)
+    return 1.0 / (1.0 - rho * r * r) - 1.0
+
+
+def ground_effect_force_n(
+    rotor_thrust_n: float, height_m: float, rho: float, rotor_radius_m: float, cutoff_m: float
+) -> float:
+    """Equation 3.4: the vertical force one rotor gains at `height_m` above the surface."""
+    return rotor_thrust_n * thrust_gain(height_m, rho, rotor_radius_m, cutoff_m)
+
+
+def hover_rotor_speed_in_ground_effect_rad_s(
+    weight_n: float,
+    thrust_coefficient_n_s2: float,
+    height_m: float,
+    rho: float,
+    rotor_radius_m: float,
+    cutoff_m: float,
+) -> float:
+    """The rotor speed at which four level rotors at `height_m` carry the weight (fig. 3.2)."""
+    per_rotor_n = weight_n / 4.0 / (1.0 + thrust_gain(height_m, rho, rotor_radius_m, cutoff_m))
+    return math.sqrt(per_rotor_n / thrust_coefficient_n_s2)
+
+
+@dataclass(frozen=True)
+class GroundEffectParams:
+    """The thesis's ground effect; `rho` is rho_sim (the thesis used 1 and 2)."""
+
+    rho: float = param(1.0, lo=0.0, hi=50.0, lo_open=True, doc="strength rho of equation 3.4")
+    cutoff_m: float | None = param(
+        None,
+        unit="m",
+        lo=0.0,
+        hi=1.0,
+        lo_open=True,
+        doc="height below which the force is constant; default: the thesis's rule",
+    )
+    ray_length_m: float = param(
+        3.0, unit="m", lo=0.1, hi=100.0, doc="beyond this nothing is below (f_ge = 0)"
+    )
+
+    def cutoff_for(self, rotor_radius_m: float) -> float:
+        return resolve_cutoff_m(self.rho, self.cutoff_m, rotor_radius_m)
+
+
+@dataclass(frozen=True)
+class CeilingEffectParams:
+    """Ceiling effect: the same law with the distance to the surface above, a thrust gain."""
+
+    rho: float = param(1.0, lo=0.0, hi=50.0, lo_open=True, doc="strength, as rho of eq. 3.4")
+    cutoff_m: float | None = param(
+        None, unit="m", lo=0.0, hi=1.0, lo_open=True, doc="distance below which it is constant"
+    )
+    ray_length_m: float = param(3.0, unit="m", lo=0.1, hi=100.0, doc="beyond this: no ceiling")
+
+    def cutoff_for(self, rotor_radius_m: float) -> float:
+        return resolve_cutoff_m(self.rho, self.cutoff_m, rotor_radius_m)

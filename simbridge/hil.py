@@ -1,0 +1,299 @@
+"""The PX4 simulator protocol's messages: the vehicle state in, MAVLink bytes out, and back.
+
+Simulator -> autopilot, per control step: HIL_STATE_QUATERNION and HIL_SENSOR; ODOMETRY (a
+motion-capture pose, float precision), DISTANCE_SENSOR (downward range) and
+ESC_TELEMETRY_1_TO_4 (actual rotor speeds, so motor lag is observable) at their world-file
+rates; HIL_GPS at 10 Hz; HIL_SENSOR always last. Autopilot -> simulator:
+HIL_ACTUATOR_CONTROLS. Units and frames (NED, FRD, degE7, mm, cm/s, mG, gauss, hPa) exist
+only here and in `frames`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from simbridge.effects.sensor_errors import add, delay_steps
+from simbridge.frames import (
+    enu_to_ned,
+    flu_to_frd,
+    local_to_geodetic,
+    ned_to_enu,
+    quat_enu_flu_to_ned_frd,
+    quat_to_matrix,
+    rotate_transposed,
+)
+from simbridge.physics import VehicleState
+from simbridge.vehicle import GRAVITY_M_S2, Vehicle
+from simbridge.wire import PacketSequence, WirePacker
+from simbridge.world import World
+
+SIM_SYSTEM_ID = 1
+SIM_COMPONENT_ID = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
+# HIL_SENSOR.fields_updated: accelerometer, gyro, magnetometer, barometer (MAVLINK.md).
+FIELDS_UPDATED = 0x7 | 0x38 | 0x1C0 | 0x1A00
+LOCKSTEP_FLAG = 1  # HIL_ACTUATOR_CONTROLS.flags bit 0
+ARMED_MODE = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+UNKNOWN_COVARIANCE = [math.nan] + [0.0] * 20
+RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
+
+
+def pressure_hpa(altitude_amsl_m: float) -> float:
+    """International standard atmosphere, troposphere."""
+    return 1013.25 * (1.0 - 2.25577e-5 * altitude_amsl_m) ** 5.25588
+
+
+def _int16(v: float) -> int:
+    return max(-32767, min(32767, round(v)))
+
+
+@dataclass(frozen=True)
+class ActuatorCommand:
+    """One HIL_ACTUATOR_CONTROLS decoded: rotor speed commands and the flags that matter."""
+
+    rotor_speeds_rad_s: tuple[float, float, float, float]
+    armed: bool
+    lockstep: bool
+    clamped: int  # values that were NaN or outside [0, 1]
+
+
+def decode_actuators(
+    controls: Sequence[float], mode: int, flags: int, vehicle: Vehicle
+) -> ActuatorCommand:
+    """controls[ch] in [0, 1] is n / n_max of the rotor on channel ch; bad values are clamped."""
+    clamped = 0
+    speeds = []
+    for ch in vehicle.actuator_channels:
+        c = controls[ch]
+        if not 0.0 <= c <= 1.0:  # also true for NaN
+            clamped += 1
+            c = 0.0 if math.isnan(c) else min(max(c, 0.0), 1.0)
+        speeds.append(c * vehicle.max_rotor_speed_rad_s)
+    return ActuatorCommand(
+        rotor_speeds_rad_s=(speeds[0], speeds[1], speeds[2], speeds[3]),
+        armed=bool(mode & ARMED_MODE),
+        lockstep=bool(flags & LOCKSTEP_FLAG),
+        clamped=clamped,
+    )
+
+
+class HilEncoder:
+    """Encodes each control step's sensors; keeps the sequence counter and the delay lines."""
+
+    def __init__(self, world: World, vehicle: Vehicle) -> None:
+        self.world, self.vehicle = world, vehicle
+        seq = PacketSequence()
+
+        def packer(cls: object) -> WirePacker:
+            return WirePacker(cls, SIM_SYSTEM_ID, SIM_COMPONENT_ID, seq)
+
+        self._pack_hil_state = packer(mavlink.MAVLink_hil_state_quaternion_message)
+        self._pack_hil_sensor = packer(mavlink.MAVLink_hil_sensor_message)
+        self._pack_odometry = packer(mavlink.MAVLink_odometry_message)
+        self._pack_distance = packer(mavlink.MAVLink_distance_sensor_message)
+        self._pack_esc = packer(mavlink.MAVLink_esc_telemetry_1_to_4_message)
+        self._pack_gps = packer(mavlink.MAVLink_hil_gps_message)
+        fx = world.effects
+        period = world.control_period_s
+        self._imu_delay = (
+            delay_steps(fx.sensor_latency.imu_delay_s, period) if fx.sensor_latency else 0
+        )
+        self._state_delay = (
+            delay_steps(fx.sensor_latency.state_delay_s, period) if fx.sensor_latency else 0
+        )
+        self._history: deque[VehicleState] = deque(
+            maxlen=max(self._imu_delay, self._state_delay) + 1
+        )
+        bias = fx.sensor_bias
+        zero = (0.0, 0.0, 0.0)
+        self._accel_bias = bias.accel_bias_m_s2 if bias else zero
+        self._gyro_bias = bias.gyro_bias_rad_s if bias else zero
+        self._position_bias = bias.position_bias_m if bias else zero
+        self._mag_enu = ned_to_enu(world.origin.magnetic_field_ned_gauss)
+        rates = world.sensors
+        self._every = {
+            "gps": world.every_steps(rates.gps_hz),
+            "odometry": world.every_steps(rates.odometry_hz),
+            "distance": world.every_steps(rates.distance_sensor_hz),
+            "esc": world.every_steps(rates.esc_hz),
+        }
+        self._steps = 0
+
+    def _due(self, name: str) -> bool:
+        k = self._every[name]
+        return k > 0 and self._steps % k == 0
+
+    def encode(self, state: VehicleState, time_us: int) -> bytes:
+        """All messages of one control step at `time_us`, as one buffer for one send."""
+        self._history.append(state)
+        hist = self._history
+        imu = hist[max(0, len(hist) - 1 - self._imu_delay)]
+        nav = hist[max(0, len(hist) - 1 - self._state_delay)]
+        parts = [self._hil_state(nav, time_us)]
+        if self._due("odometry"):
+            parts.append(self._odometry(nav, time_us))
+        if self._due("distance"):
+            parts.append(self._distance(nav, time_us))
+        if self._due("esc"):
+            parts.append(self._esc(state))
+        if self._due("gps"):
+            parts.append(self._gps(nav, time_us))
+        # HIL_SENSOR last: it is the tick a lockstep autopilot answers, so everything of this
+        # step has arrived when it does.
+        parts.append(self._hil_sensor(imu, time_us))
+        self._steps += 1
+        return b"".join(parts)
+
+    # -- one message each ---------------------------------------------------------------
+
+    def _amsl_m(self, z_m: float) -> float:
+        return self.world.origin.alt_m + z_m
+
+    def _hil_sensor(self, s: VehicleState, time_us: int) -> bytes:
+        m = quat_to_matrix(s.quaternion)
+        a = s.acceleration_m_s2
+        specific_force = add(
+            rotate_transposed(m, (a[0], a[1], a[2] + GRAVITY_M_S2)), self._accel_bias
+        )
+        acc = flu_to_frd(specific_force)
+        gyro = flu_to_frd(add(s.angular_velocity_body_rad_s, self._gyro_bias))
+        mag = flu_to_frd(rotate_transposed(m, self._mag_enu))
+        alt = self._amsl_m(s.position_m[2] + self._position_bias[2])
+        return self._pack_hil_sensor.pack(
+            time_us,
+            acc[0],
+            acc[1],
+            acc[2],
+            gyro[0],
+            gyro[1],
+            gyro[2],
+            mag[0],
+            mag[1],
+            mag[2],
+            pressure_hpa(alt),
+            0.0,
+            alt,
+            15.0 - 0.0065 * alt,
+            FIELDS_UPDATED,
+            0,
+        )
+
+    def _position(self, s: VehicleState) -> tuple[float, float, float]:
+        p = s.position_m
+        b = self._position_bias
+        return (p[0] + b[0], p[1] + b[1], p[2] + b[2])
+
+    def _geodetic(self, s: VehicleState) -> tuple[int, int, int]:
+        x, y, z = self._position(s)
+        o = self.world.origin
+        lat, lon = local_to_geodetic(o.lat_deg, o.lon_deg, x, y)
+        return round(lat * 1e7), round(lon * 1e7), round(self._amsl_m(z) * 1000.0)
+
+    def _hil_state(self, s: VehicleState, time_us: int) -> bytes:
+        lat, lon, alt = self._geodetic(s)
+        v = enu_to_ned(s.velocity_m_s)
+        rates = flu_to_frd(s.angular_velocity_body_rad_s)
+        # xacc..zacc: the true kinematic acceleration in body FRD (as Gazebo reports it), mG.
+        acc = flu_to_frd(rotate_transposed(quat_to_matrix(s.quaternion), s.acceleration_m_s2))
+        to_mg = 1000.0 / GRAVITY_M_S2
+        speed_cm_s = min(65535, round(100.0 * math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)))
+        return self._pack_hil_state.pack(
+            time_us,
+            list(quat_enu_flu_to_ned_frd(s.quaternion)),
+            rates[0],
+            rates[1],
+            rates[2],
+            lat,
+            lon,
+            alt,
+            _int16(100 * v[0]),
+            _int16(100 * v[1]),
+            _int16(100 * v[2]),
+            speed_cm_s,
+            speed_cm_s,
+            _int16(acc[0] * to_mg),
+            _int16(acc[1] * to_mg),
+            _int16(acc[2] * to_mg),
+        )
+
+    def _odometry(self, s: VehicleState, time_us: int) -> bytes:
+        p = enu_to_ned(self._position(s))
+        v_body = flu_to_frd(rotate_transposed(quat_to_matrix(s.quaternion), s.velocity_m_s))
+        rates = flu_to_frd(s.angular_velocity_body_rad_s)
+        return self._pack_odometry.pack(
+            time_us,
+            mavlink.MAV_FRAME_LOCAL_NED,
+            mavlink.MAV_FRAME_BODY_FRD,
+            p[0],
+            p[1],
+            p[2],
+            list(quat_enu_flu_to_ned_frd(s.quaternion)),
+            v_body[0],
+            v_body[1],
+            v_body[2],
+            rates[0],
+            rates[1],
+            rates[2],
+            UNKNOWN_COVARIANCE,
+            UNKNOWN_COVARIANCE,
+            0,
+            mavlink.MAV_ESTIMATOR_TYPE_MOCAP,
+            100,
+        )
+
+    def _distance(self, s: VehicleState, time_us: int) -> bytes:
+        max_cm = round(self.vehicle.range_sensor_max_m * 100.0)
+        # MAVLink: max_distance + 1 means nothing in range.
+        current = max_cm + 1 if s.range_m == math.inf else min(max_cm, round(s.range_m * 100.0))
+        return self._pack_distance.pack(
+            time_us // 1000,
+            1,
+            max_cm,
+            current,
+            mavlink.MAV_DISTANCE_SENSOR_LASER,
+            0,
+            mavlink.MAV_SENSOR_ROTATION_PITCH_270,
+            0,
+            0.0,
+            0.0,
+            (0.0, 0.0, 0.0, 0.0),
+            0,
+        )
+
+    def _esc(self, s: VehicleState) -> bytes:
+        rpm = [min(65535, round(n * RAD_S_TO_RPM)) for n in s.rotor_speeds_rad_s]
+        count = self._steps & 0xFFFF
+        return self._pack_esc.pack([0] * 4, [0] * 4, [0] * 4, [0] * 4, rpm, [count] * 4)
+
+    def _gps(self, s: VehicleState, time_us: int) -> bytes:
+        lat, lon, alt = self._geodetic(s)
+        vn, ve, vd = enu_to_ned(s.velocity_m_s)
+        ground = math.hypot(vn, ve)
+        cog = (
+            round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0) % 36000
+            if ground > 0.05
+            else 65535
+        )
+        return self._pack_gps.pack(
+            time_us,
+            3,
+            lat,
+            lon,
+            alt,
+            100,
+            100,
+            min(65535, round(ground * 100.0)),
+            _int16(vn * 100),
+            _int16(ve * 100),
+            _int16(vd * 100),
+            cog,
+            12,
+            0,
+            0,
+        )

@@ -1,0 +1,57 @@
+"""Rotor forces, thrust and moments: thesis equations 3.5 and 3.6, and their inverse (the mixer).
+
+Rotors are numbered as in 3.6: 0 front-left, 1 back-left, 2 back-right, 3 front-right.
+"""
+
+from __future__ import annotations
+
+import math
+
+Quad = tuple[float, float, float, float]
+
+
+def rotor_forces_n(thrust_coefficient_n_s2: float, rotor_speeds_rad_s: Quad) -> Quad:
+    """Equation 3.5: f_i = C_T n_i^2."""
+    c = thrust_coefficient_n_s2
+    n0, n1, n2, n3 = rotor_speeds_rad_s
+    return (c * n0 * n0, c * n1 * n1, c * n2 * n2, c * n3 * n3)
+
+
+def thrust_and_moments(
+    rotor_forces: Quad, arm_m: float, yaw_moment_coefficient_m: float
+) -> tuple[float, float, float, float]:
+    """Equation 3.6: (T [N], M_x, M_y, M_z [N m]) in the body frame (x forward, y left, z up)."""
+    f0, f1, f2, f3 = rotor_forces
+    return (
+        f0 + f1 + f2 + f3,
+        arm_m * (f0 + f1 - f2 - f3),
+        arm_m * (-f0 + f1 + f2 - f3),
+        yaw_moment_coefficient_m * (-f0 + f1 - f2 + f3),
+    )
+
+
+def rotor_forces_for(
+    thrust_n: float,
+    moments_n_m: tuple[float, float, float],
+    arm_m: float,
+    yaw_moment_coefficient_m: float,
+) -> Quad:
+    """Inverse of equation 3.6: the rotor forces that give thrust T and moments M."""
+    mx, my, mz = moments_n_m
+    t, x, y, z = (
+        thrust_n / 4.0,
+        mx / (4.0 * arm_m),
+        my / (4.0 * arm_m),
+        mz / (4.0 * yaw_moment_coefficient_m),
+    )
+    return (t + x - y - z, t + x + y + z, t - x + y - z, t - x - y + z)
+
+
+def rotor_speeds_for(
+    thrust_coefficient_n_s2: float, rotor_forces: Quad, max_rotor_speed_rad_s: float
+) -> Quad:
+    """Inverse of equation 3.5, saturated to [0, n_max] (a rotor cannot pull downward)."""
+    return tuple(  # type: ignore[return-value]
+        min(math.sqrt(max(f, 0.0) / thrust_coefficient_n_s2), max_rotor_speed_rad_s)
+        for f in rotor_forces
+    )

@@ -1,0 +1,214 @@
+"""The HIL link: a TCP server speaking the PX4 simulator protocol to one autopilot.
+
+Lockstep (the autopilot sets HIL_ACTUATOR_CONTROLS.flags bit 0, as PX4 does): send the
+sensors for time t, wait for exactly one HIL_ACTUATOR_CONTROLS, step physics to t + dt,
+repeat; every wait is bounded. Free-running (no lockstep flag): step at `speedup` times real
+time with the latest actuators. Until the first HIL_ACTUATOR_CONTROLS arrives the sensors
+flow at real-time pace and the vehicle stands at its start pose, as on a stand, so an
+autopilot that takes seconds to boot finds it where the world file put it.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from simbridge.hil import ActuatorCommand, HilEncoder, decode_actuators, mavlink
+from simbridge.physics import Simulation
+from simbridge.vehicle import Vehicle
+from simbridge.wire import WireUnpacker
+from simbridge.world import World
+
+
+@dataclass(frozen=True)
+class ServerOptions:
+    host: str = "127.0.0.1"
+    port: int = 4560  # 0: an ephemeral port, printed when listening
+    speedup: float | None = 1.0  # simulated seconds per wall second; None: as fast as possible
+    timeout_s: float = 10.0  # longest wait for an autopilot's reply in lockstep
+
+
+@dataclass
+class LinkCounters:
+    steps: int = 0
+    actuator_messages: int = 0
+    malformed: int = 0  # bad CRC or framing
+    unknown: int = 0  # message ids outside the dialect
+    ignored: int = 0  # valid messages the simulator has no use for
+    clamped: int = 0  # actuator values NaN or outside [0, 1]
+
+
+SPIN_S = 0.0005  # longest busy-poll for a reply before sleeping in the kernel
+
+
+class LinkEnded(Exception):
+    """The run is over; the message says why in one line. A timeout is not a clean end."""
+
+    def __init__(self, reason: str, clean: bool = True) -> None:
+        super().__init__(reason)
+        self.clean = clean
+
+
+class SimServer:
+    def __init__(
+        self,
+        world: World,
+        vehicle: Vehicle,
+        options: ServerOptions,
+        say: Callable[[str], None] = print,
+    ) -> None:
+        self.world, self.vehicle, self.options, self.say = world, vehicle, options, say
+        self.counters = LinkCounters()
+        self._parser = mavlink.MAVLink(None)
+        self._parser.robust_parsing = True
+        self._actuators = WireUnpacker(mavlink.MAVLink_hil_actuator_controls_message)
+        self._listener: socket.socket | None = None
+        self.sim_time_s = 0.0
+        self.wall_s = 0.0
+
+    def listen(self) -> int:
+        """Bind and listen; returns the port (useful with port 0)."""
+        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        s.bind((self.options.host, self.options.port))
+        s.listen(1)
+        self._listener = s
+        return s.getsockname()[1]
+
+    def serve(self) -> LinkEnded:
+        """Accept one autopilot, run until it leaves or a wait times out; returns why it ended."""
+        if self._listener is None:
+            self.listen()
+        assert self._listener is not None
+        conn, _ = self._listener.accept()
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        try:
+            self._run(conn)
+        except LinkEnded as end:
+            return end
+        finally:
+            conn.close()
+            self._listener.close()
+        raise AssertionError("the lockstep loop only ends by LinkEnded")
+
+    def summary(self, reason: str) -> str:
+        c = self.counters
+        rtf = self.sim_time_s / self.wall_s if self.wall_s > 0 else 0.0
+        return (
+            f"{reason}; {c.steps} steps, {self.sim_time_s:.3f} s simulated in {self.wall_s:.2f} s "
+            f"wall ({rtf:.1f}x real time); dropped {c.malformed} malformed and {c.unknown} unknown "
+            f"messages; clamped {c.clamped} actuator values"
+        )
+
+    # -- the loop -------------------------------------------------------------------------
+
+    def _run(self, conn: socket.socket) -> None:
+        world, options = self.world, self.options
+        with Simulation(world, self.vehicle, held=True) as sim:
+            encoder = HilEncoder(world, self.vehicle)
+            command: ActuatorCommand | None = None
+            period = world.control_period_s
+            wall0 = time.perf_counter()
+            try:
+                self._send(conn, encoder.encode(sim.state(), sim.time_us))
+                while True:
+                    if command is None:  # before the first actuators: real-time pace, no waiting
+                        command = self._receive(conn, period, required=False)
+                        if command is not None:
+                            sim.release()
+                    elif command.lockstep:
+                        command = self._receive(conn, options.timeout_s, required=True) or command
+                    else:
+                        command = self._receive(conn, 0.0, required=False) or command
+                    sim.step(command.rotor_speeds_rad_s if command else (0.0, 0.0, 0.0, 0.0))
+                    self.counters.steps += 1
+                    self.sim_time_s = sim.time_s
+                    if options.speedup is not None and command is not None:
+                        lag = wall0 + sim.time_s / options.speedup - time.perf_counter()
+                        if lag > 0.0:
+                            time.sleep(lag)
+                    self._send(conn, encoder.encode(sim.state(), sim.time_us))
+            finally:
+                self.wall_s = time.perf_counter() - wall0
+
+    def _send(self, conn: socket.socket, data: bytes) -> None:
+        try:
+            conn.settimeout(self.options.timeout_s)  # blocking again after a poll
+            conn.sendall(data)
+        except OSError:
+            raise LinkEnded("autopilot disconnected") from None
+
+    def _receive(
+        self, conn: socket.socket, wait_s: float, *, required: bool
+    ) -> ActuatorCommand | None:
+        """The latest HIL_ACTUATOR_CONTROLS within `wait_s`; counts and drops everything else."""
+        if wait_s > 0.0:
+            # Busy-poll briefly first: a lockstep reply usually comes within a few hundred
+            # microseconds, and waking a sleeping process costs about 30 us on this kind of
+            # machine, a sixth of the whole step at 20x real time.
+            command = self._poll(conn, SPIN_S)
+            if command is not None:
+                return command
+        deadline = time.perf_counter() + wait_s
+        while True:
+            remaining = deadline - time.perf_counter()
+            try:
+                conn.settimeout(max(remaining, 0.0) if remaining > 0 else 0.0)
+                data = conn.recv(65536)
+            except (TimeoutError, BlockingIOError):
+                if required:
+                    raise LinkEnded(
+                        f"no HIL_ACTUATOR_CONTROLS for {wait_s:g} s", clean=False
+                    ) from None
+                return None
+            except OSError:
+                raise LinkEnded("autopilot disconnected") from None
+            if not data:
+                raise LinkEnded("autopilot disconnected")
+            command = self._parse(data)
+            if command is not None:
+                return command
+
+    def _poll(self, conn: socket.socket, spin_s: float) -> ActuatorCommand | None:
+        conn.setblocking(False)
+        end = time.perf_counter() + spin_s
+        while time.perf_counter() < end:
+            try:
+                data = conn.recv(65536)
+            except BlockingIOError:
+                continue
+            except OSError:
+                raise LinkEnded("autopilot disconnected") from None
+            if not data:
+                raise LinkEnded("autopilot disconnected")
+            command = self._parse(data)
+            if command is not None:
+                return command
+        return None
+
+    def _parse(self, data: bytes) -> ActuatorCommand | None:
+        c = self.counters
+        if self._parser.buf_len() == 0:  # nothing pending: try the one-whole-frame fast path
+            fields = self._actuators.unpack(data)
+            if fields is not None:
+                c.actuator_messages += 1
+                command = decode_actuators(
+                    fields["controls"], fields["mode"], fields["flags"], self.vehicle
+                )
+                c.clamped += command.clamped
+                return command
+        latest = None
+        for msg in self._parser.parse_buffer(data) or ():
+            if isinstance(msg, mavlink.MAVLink_hil_actuator_controls_message):
+                latest = decode_actuators(msg.controls, msg.mode, msg.flags, self.vehicle)
+                c.actuator_messages += 1
+                c.clamped += latest.clamped
+            elif isinstance(msg, mavlink.MAVLink_bad_data):
+                c.malformed += 1
+            elif isinstance(msg, mavlink.MAVLink_unknown):
+                c.unknown += 1
+            else:
+                c.ignored += 1
+        return latest

@@ -1,0 +1,44 @@
+"""Shared fixtures: real `groundfx sim` processes on ephemeral loopback ports, always cleaned up."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import yaml
+
+os.environ.setdefault("MAVLINK20", "1")
+
+
+@pytest.fixture
+def sim_process() -> Iterator[Callable[..., tuple[subprocess.Popen[str], int]]]:
+    """Start `groundfx sim --port 0 ...`; returns (process, port). Killed at teardown."""
+    from simbridge.launch import start_sim
+
+    started: list[subprocess.Popen[str]] = []
+
+    def start(world: str | Path = "default", **kwargs: object) -> tuple[subprocess.Popen[str], int]:
+        proc, port = start_sim(world, **kwargs)  # type: ignore[arg-type]
+        started.append(proc)
+        return proc, port
+
+    yield start
+    for proc in started:
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate(timeout=10)
+
+
+@pytest.fixture
+def write_world(tmp_path: Path) -> Callable[[dict], Path]:
+    """Write a world YAML (defaults filled in) to a temporary file."""
+
+    def write(data: dict, name: str = "world.yaml") -> Path:
+        path = tmp_path / name
+        path.write_text(yaml.safe_dump(data))
+        return path
+
+    return write

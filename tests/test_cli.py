@@ -1,0 +1,42 @@
+"""The command line: the figure, the benchmark's figures and the demo, as a user runs them."""
+
+from __future__ import annotations
+
+import json
+
+from tests.helpers import run_groundfx
+
+
+def test_plot_ground_effect_writes_a_png(tmp_path):
+    out = tmp_path / "ge.png"
+    result = run_groundfx("plot", "ground-effect", "--rho", "1,2", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 10_000
+
+
+def test_plot_refuses_a_bad_rho():
+    result = run_groundfx("plot", "ground-effect", "--rho", "1,-2")
+    assert result.returncode == 2 and "--rho" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_bench_sim_prints_its_figures_as_json():
+    result = run_groundfx("bench", "sim", "--json", "--seconds", "1")
+    assert result.returncode == 0, result.stderr
+    figures = json.loads(result.stdout.strip().splitlines()[-1])
+    assert figures["physics_rtf"] > 0 and figures["lockstep_rtf"] > 0
+    assert figures["effects"] == ["ground_effect"] and figures["physics_hz"] == 1000
+    assert figures["control_hz"] == 250
+    assert figures["physics_altitude_drift_m"] < 1e-3  # it benchmarks a hovering drone
+    assert "autopilot disconnected; 250 steps" in figures["sim_report"]
+
+
+def test_demo_shows_the_ground_effect_lifting_the_drone(tmp_path):
+    result = run_groundfx("demo", "--logs", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    predicted = float(next(ln for ln in lines if "predicts" in ln).split("predicts")[1].split()[0])
+    rows = [ln.split() for ln in lines if ln.strip()[:1].isdigit()]
+    altitudes = [float(r[1]) for r in rows]
+    assert altitudes == sorted(altitudes) and altitudes[0] > 0.03  # it climbs out of ground effect
+    assert predicted > 1.0
+    assert (tmp_path / "ground_effect.png").exists()

@@ -1,0 +1,143 @@
+"""The effects as pure functions, against their equations."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from simbridge.effects.actuators import motor_lag_step
+from simbridge.effects.drag import (
+    BodyDragParams,
+    RotorDragParams,
+    WindParams,
+    body_drag_n,
+    rotor_drag_n,
+    wind_velocity_m_s,
+)
+from simbridge.effects.ground import (
+    GroundEffectParams,
+    cutoff_height_m,
+    ground_effect_force_n,
+    hover_rotor_speed_in_ground_effect_rad_s,
+    singular_height_m,
+)
+from simbridge.effects.proximity import WallEffectParams, wall_force_n
+from simbridge.effects.sensor_errors import delay_steps
+from simbridge.rotors import rotor_forces_for, rotor_forces_n, rotor_speeds_for, thrust_and_moments
+
+R = 0.047
+C_T = 2.39e-5
+
+
+def equation_3_4(n: float, z: float, rho: float) -> float:
+    return C_T * n**2 * (1.0 / (1.0 - rho * (R / (4.0 * z)) ** 2) - 1.0)
+
+
+@pytest.mark.parametrize(("rho", "cutoff"), [(1.0, 0.02), (2.0, 0.02), (0.5, 0.01), (4.0, 0.03)])
+def test_cutoff_is_the_smallest_two_decimal_height_above_the_singularity(rho, cutoff):
+    assert cutoff_height_m(rho, R) == pytest.approx(cutoff)
+    assert cutoff_height_m(rho, R) > singular_height_m(rho, R) > cutoff_height_m(rho, R) - 0.01
+
+
+@pytest.mark.parametrize("rho", [1.0, 2.0])
+@pytest.mark.parametrize("z", [0.02, 0.03, 0.05, 0.1, 0.25, 0.5])
+def test_ground_effect_is_equation_3_4(rho, z):
+    n = 76.0
+    assert ground_effect_force_n(C_T * n * n, z, rho, R, 0.02) == pytest.approx(
+        equation_3_4(n, z, rho), rel=1e-12
+    )
+
+
+def test_ground_effect_is_constant_below_the_cutoff_and_zero_with_nothing_below():
+    at_cutoff = ground_effect_force_n(0.137, 0.02, 2.0, R, 0.02)
+    for z in (0.0, 0.005, 0.0166, 0.0199):
+        assert ground_effect_force_n(0.137, z, 2.0, R, 0.02) == at_cutoff
+    assert ground_effect_force_n(0.137, math.inf, 2.0, R, 0.02) == 0.0
+    # rho = 2 at the cut-off: the rotor gains 2.23x its thrust
+    assert at_cutoff / 0.137 == pytest.approx(1 / (1 - 2 * (0.047 / 0.08) ** 2) - 1)
+
+
+def test_a_cutoff_below_the_singularity_is_refused():
+    with pytest.raises(ValueError, match="singular height"):
+        GroundEffectParams(rho=2.0, cutoff_m=0.015).cutoff_for(R)
+
+
+def test_hover_speed_in_ground_effect_carries_the_weight():
+    weight = 0.056 * 9.81
+    for z in (0.03, 0.1, 1.0):
+        n = hover_rotor_speed_in_ground_effect_rad_s(weight, C_T, z, 1.0, R, 0.02)
+        assert 4 * (C_T * n * n + equation_3_4(n, z, 1.0)) == pytest.approx(weight)
+
+
+def test_equations_3_5_and_3_6_and_their_inverse():
+    forces = rotor_forces_n(C_T, (70.0, 80.0, 75.0, 72.0))
+    assert forces[1] == pytest.approx(C_T * 80.0**2)
+    k, kz = 0.03164, 0.005964
+    t, mx, my, mz = thrust_and_moments(forces, k, kz)
+    f0, f1, f2, f3 = forces
+    assert t == pytest.approx(f0 + f1 + f2 + f3)
+    assert mx == pytest.approx(k * (f0 + f1 - f2 - f3))
+    assert my == pytest.approx(k * (-f0 + f1 + f2 - f3))
+    assert mz == pytest.approx(kz * (-f0 + f1 - f2 + f3))
+    assert rotor_forces_for(t, (mx, my, mz), k, kz) == pytest.approx(forces)
+    assert rotor_speeds_for(C_T, forces, 140.0) == pytest.approx((70.0, 80.0, 75.0, 72.0))
+    assert rotor_speeds_for(C_T, (-0.1, 0.0, 1.0, 0.1), 140.0) == pytest.approx(
+        (0.0, 0.0, 140.0, math.sqrt(0.1 / C_T))
+    )
+
+
+def test_motor_lag_is_the_exact_first_order_response():
+    n = 0.0
+    for _ in range(20):  # 20 ms with tau = 20 ms: 1 - 1/e of the step
+        n = motor_lag_step(n, 100.0, 0.001, 0.02)
+    assert n == pytest.approx(100.0 * (1 - math.exp(-1.0)), rel=1e-9)
+
+
+def test_rotor_drag_opposes_air_relative_velocity_linearly():
+    params = RotorDragParams(coefficient_n_s_m=(2e-5, 3e-5, 1e-5))
+    f = rotor_drag_n(params, 300.0, (1.0, -2.0, 0.5))
+    assert f == pytest.approx((-2e-5 * 300, 3e-5 * 300 * 2, -1e-5 * 300 * 0.5))
+
+
+def test_body_drag_is_quadratic():
+    params = BodyDragParams(
+        drag_coefficient=1.2, area_m2=(0.002, 0.003, 0.006), air_density_kg_m3=1.2
+    )
+    v = (3.0, 4.0, 0.0)
+    f = body_drag_n(params, v)
+    assert f == pytest.approx(
+        (-0.5 * 1.2 * 1.2 * 0.002 * 5 * 3, -0.5 * 1.2 * 1.2 * 0.003 * 5 * 4, 0.0)
+    )
+
+
+def test_wind_constant_and_gusts_with_the_stated_spread():
+    calm = WindParams(mean_m_s=(1.0, 0.0, 0.0))
+    assert wind_velocity_m_s(calm, 12.3) == (1.0, 0.0, 0.0)
+    gusty = WindParams(mean_m_s=(1.0, 0.0, 0.0), gust_std_m_s=0.5, gust_seed=3)
+    samples = [wind_velocity_m_s(gusty, 0.01 * k) for k in range(200_000)]  # 2000 s
+    for axis, mean in enumerate((1.0, 0.0, 0.0)):
+        values = [s[axis] for s in samples]
+        mu = sum(values) / len(values)
+        sd = math.sqrt(sum((v - mu) ** 2 for v in values) / len(values))
+        assert mu == pytest.approx(mean, abs=0.05)
+        assert sd == pytest.approx(0.5, rel=0.05)
+    assert wind_velocity_m_s(gusty, 7.0) == wind_velocity_m_s(gusty, 7.0)  # pure in time
+    other = WindParams(mean_m_s=(1.0, 0.0, 0.0), gust_std_m_s=0.5, gust_seed=4)
+    assert wind_velocity_m_s(other, 7.0) != wind_velocity_m_s(gusty, 7.0)
+
+
+def test_wall_force_points_to_the_wall_and_decays_with_the_inverse_square():
+    params = WallEffectParams(gain=0.5, range_m=0.5, min_distance_m=0.02)
+    inf = math.inf
+    near = wall_force_n(params, 0.55, R, (0.1, inf, inf, inf))  # wall 0.1 m in +x
+    far = wall_force_n(params, 0.55, R, (0.2, inf, inf, inf))
+    assert near[0] == pytest.approx(0.5 * 0.55 * (R / 0.4) ** 2) and near[1] == 0.0
+    assert near[0] / far[0] == pytest.approx(4.0)
+    assert wall_force_n(params, 0.55, R, (inf, inf, inf, 0.1))[1] < 0  # wall in -y
+    assert wall_force_n(params, 0.55, R, (0.6, inf, inf, inf)) == (0.0, 0.0, 0.0)  # out of range
+
+
+def test_sensor_delay_in_control_periods():
+    assert delay_steps(0.008, 0.004) == 2
+    assert delay_steps(0.0, 0.004) == 0
