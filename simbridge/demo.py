@@ -50,8 +50,10 @@ def run_demo(world_name: str, logs: Path, say=print) -> None:
     rows = []
     view = ClientView()
     try:
-        for _ in range(6):
-            run_lockstep(sock, 25, command, view)  # 0.1 s per row
+        # Two answers: the sensors of the first step (t = 4 ms) then arrive, holding the
+        # acceleration over a step that began at 3 cm; then one row every 0.1 s.
+        for answers in (2, 24, 25, 25, 25, 25, 25):
+            run_lockstep(sock, answers, command, view)
             state, sensor = view.latest["HIL_STATE_QUATERNION"], view.latest["HIL_SENSOR"]
             rows.append(
                 (
@@ -63,10 +65,13 @@ def run_demo(world_name: str, logs: Path, say=print) -> None:
             )
     finally:
         sock.close()
-    say(f"  equation 3.4 predicts {predicted:.3f} m/s^2 upward at {START_ALTITUDE_M} m")
+    say(
+        f"  equation 3.4 predicts {predicted:.3f} m/s^2 upward at {START_ALTITUDE_M} m; "
+        f"the first row measures it"
+    )
     say("  t [s]   altitude [m]   climb [m/s]   measured vertical accel [m/s^2]")
     for t, z, vz, az in rows:
-        say(f"  {t:5.2f}   {z:12.4f}   {vz:11.2f}   {az:10.3f}")
+        say(f"  {t:5.3f}   {z:12.4f}   {vz:11.2f}   {az:10.3f}")
     say(f"  simulator: {finish(proc)}")
     png = plot_ground_effect(vehicle, [0.5, 1.0, 2.0, 4.0], logs / "ground_effect.png")
     say(f"  ground effect against altitude for rho 0.5, 1, 2, 4: {png}")

@@ -16,11 +16,11 @@ import pybullet as pb
 
 from simbridge.effects.actuators import motor_lag_step
 from simbridge.effects.drag import body_drag_n, rotor_drag_n, wind_velocity_m_s
-from simbridge.effects.ground import thrust_gain
+from simbridge.effects.ground import ground_effect_force_n, thrust_gain
 from simbridge.effects.proximity import WALL_DIRECTIONS, wall_force_n
 from simbridge.frames import Quat, Vec3, quat_from_euler, wxyz_to_xyzw, xyzw_to_wxyz
-from simbridge.rotors import Quad
-from simbridge.vehicle import GRAVITY_M_S2, ROTOR_YAW_SIGN, Vehicle
+from simbridge.rotors import Quad, rotor_forces_n, thrust_and_moments
+from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 from simbridge.world import World
 
 WORLD_GROUP = 1  # collision group of the ground and obstacles: what rays see
@@ -207,8 +207,7 @@ class Simulation:
             tau = self._lag_tau
             for i in range(4):
                 n[i] = motor_lag_step(n[i], cmd[i], dt, tau)
-        c_t = self._c_t
-        f = [c_t * n[0] * n[0], c_t * n[1] * n[1], c_t * n[2] * n[2], c_t * n[3] * n[3]]
+        f = rotor_forces_n(self._c_t, n)  # equation 3.5
 
         # Rotor hubs relative to the centre of mass, in the world frame.
         offsets = [
@@ -231,16 +230,7 @@ class Simulation:
             extra = sum(boosted) - sum(f)
             self._ce_force[:] = (m[2] * extra, m[5] * extra, m[8] * extra)
             f = boosted
-        arm, kz = self._arm, self._kz
-        thrust = f[0] + f[1] + f[2] + f[3]
-        mx = arm * (f[0] + f[1] - f[2] - f[3])
-        my = arm * (-f[0] + f[1] + f[2] - f[3])
-        mz = kz * (
-            ROTOR_YAW_SIGN[0] * f[0]
-            + ROTOR_YAW_SIGN[1] * f[1]
-            + ROTOR_YAW_SIGN[2] * f[2]
-            + ROTOR_YAW_SIGN[3] * f[3]
-        )
+        thrust, mx, my, mz = thrust_and_moments(f, self._arm, self._kz)  # equation 3.6, body
         force = [m[2] * thrust, m[5] * thrust, m[8] * thrust]
         torque = [
             m[0] * mx + m[1] * my + m[2] * mz,
@@ -252,7 +242,7 @@ class Simulation:
             rho, radius, cut = self._ge.rho, self._radius, self._ge_cutoff
             total = 0.0
             for i in range(4):
-                g = f[i] * thrust_gain(heights[i], rho, radius, cut)
+                g = ground_effect_force_n(f[i], heights[i], rho, radius, cut)
                 self._ge_rotor[i] = g
                 total += g
                 torque[0] += offsets[i][1] * g

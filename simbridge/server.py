@@ -155,7 +155,7 @@ class SimServer:
         while True:
             remaining = deadline - time.perf_counter()
             try:
-                conn.settimeout(max(remaining, 0.0) if remaining > 0 else 0.0)
+                conn.settimeout(max(remaining, 0.0))  # 0: a non-blocking poll
                 data = conn.recv(65536)
             except (TimeoutError, BlockingIOError):
                 if required:

@@ -15,10 +15,8 @@ VEHICLES_DIR = Path(__file__).parent / "vehicles"
 GRAVITY_M_S2 = 9.81
 
 # Rotor layout in the body frame (x forward, y left), as multiples of half the rotor spacing,
-# and the sign of each rotor's yaw reaction torque: thesis equation 3.6,
-# M_z = k_z (-f0 + f1 - f2 + f3).
+# numbered as thesis equation 3.6 (see `simbridge.rotors`).
 ROTOR_LAYOUT = ((1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0))
-ROTOR_YAW_SIGN = (-1.0, 1.0, -1.0, 1.0)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,119 @@
+"""What the HIL messages say about a known state, decoded by pymavlink: units, frames, errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+
+from simbridge.effects.sensor_errors import SensorBiasParams, SensorLatencyParams
+from simbridge.hil import HilEncoder, mavlink
+from simbridge.physics import VehicleState, with_effects
+from simbridge.vehicle import load_vehicle
+from simbridge.world import SensorRates, load_world
+
+VEHICLE = load_vehicle()
+
+
+def state(x=0.0, y=0.0, z=1.0, *, t=0.0, v=(0.0, 0.0, 0.0), range_m=1.0, rotors=(0.0,) * 4):
+    return VehicleState(
+        time_s=t,
+        position_m=(x, y, z),
+        quaternion=(1.0, 0.0, 0.0, 0.0),
+        velocity_m_s=v,
+        angular_velocity_body_rad_s=(0.01, 0.02, 0.03),
+        acceleration_m_s2=(0.0, 0.0, 0.0),
+        rotor_speeds_rad_s=rotors,
+        range_m=range_m,
+    )
+
+
+def decode(data: bytes) -> dict[str, list]:
+    out: dict[str, list] = {}
+    for msg in mavlink.MAVLink(None).parse_buffer(data) or ():
+        out.setdefault(msg.get_type(), []).append(msg)
+    return out
+
+
+def every_step(world):
+    rates = SensorRates(gps_hz=250, odometry_hz=250, distance_sensor_hz=250, esc_hz=250)
+    return dataclasses.replace(world, sensors=rates)
+
+
+def test_a_level_hovering_state_in_mavlink_units_and_frames():
+    world = every_step(load_world())
+    msgs = decode(
+        HilEncoder(world, VEHICLE).encode(
+            state(
+                1.0, 2.0, 1.5, v=(0.3, -0.2, 0.1), range_m=0.0345, rotors=(70.0, 71.0, 72.0, 73.0)
+            ),
+            8000,
+        )
+    )
+    assert list(msgs)[-1] == "HIL_SENSOR"  # the tick comes last
+    sensor = msgs["HIL_SENSOR"][0]
+    assert (sensor.xacc, sensor.yacc, sensor.zacc) == pytest.approx((0.0, 0.0, -9.81))
+    assert (sensor.xgyro, sensor.ygyro, sensor.zgyro) == pytest.approx((0.01, -0.02, -0.03))
+    assert (
+        sensor.time_usec == 8000 and sensor.fields_updated == 0x1BFF
+    )  # no airspeed: diff_pressure unset
+    assert sensor.abs_pressure == pytest.approx(
+        1013.25 * (1 - 2.25577e-5 * 29.5) ** 5.25588, rel=1e-6
+    )
+    hsq = msgs["HIL_STATE_QUATERNION"][0]
+    assert (hsq.vx, hsq.vy, hsq.vz) == (-20, 30, -10)  # NED cm/s
+    assert hsq.alt == 29500
+    odo = msgs["ODOMETRY"][0]
+    assert (odo.x, odo.y, odo.z) == pytest.approx((2.0, 1.0, -1.5))  # NED metres
+    assert (
+        odo.frame_id == mavlink.MAV_FRAME_LOCAL_NED
+        and odo.child_frame_id == mavlink.MAV_FRAME_BODY_FRD
+    )
+    assert msgs["DISTANCE_SENSOR"][0].current_distance == 3  # MAVLink's whole centimetres
+    assert msgs["DISTANCE_SENSOR"][0].orientation == mavlink.MAV_SENSOR_ROTATION_PITCH_270
+    assert list(msgs["ESC_TELEMETRY_1_TO_4"][0].rpm) == [
+        round(n * 60 / (2 * math.pi)) for n in (70, 71, 72, 73)
+    ]
+    gps = msgs["HIL_GPS"][0]
+    assert gps.fix_type == 3 and (gps.vn, gps.ve, gps.vd) == (-20, 30, -10)
+
+
+def test_nothing_in_range_reads_max_plus_one():
+    msgs = decode(HilEncoder(every_step(load_world()), VEHICLE).encode(state(range_m=math.inf), 0))
+    reading = msgs["DISTANCE_SENSOR"][0]
+    assert reading.current_distance == reading.max_distance + 1 == 401
+
+
+def test_sensor_bias_offsets_accelerometer_gyro_and_position():
+    bias = SensorBiasParams(
+        accel_bias_m_s2=(0.1, 0.2, 0.3),
+        gyro_bias_rad_s=(0.01, 0.0, -0.01),
+        position_bias_m=(0.0, 0.0, 0.05),
+    )
+    world = every_step(with_effects(load_world(), sensor_bias=bias))
+    msgs = decode(HilEncoder(world, VEHICLE).encode(state(z=1.0), 0))
+    sensor = msgs["HIL_SENSOR"][0]
+    assert (sensor.xacc, sensor.yacc, sensor.zacc) == pytest.approx((0.1, -0.2, -(9.81 + 0.3)))
+    assert (sensor.xgyro, sensor.ygyro, sensor.zgyro) == pytest.approx((0.02, -0.02, -0.02))
+    assert msgs["HIL_STATE_QUATERNION"][0].alt == 29050
+    assert msgs["ODOMETRY"][0].z == pytest.approx(-1.05)
+
+
+def test_sensor_latency_reports_older_states():
+    latency = SensorLatencyParams(imu_delay_s=0.004, state_delay_s=0.008)
+    encoder = HilEncoder(every_step(with_effects(load_world(), sensor_latency=latency)), VEHICLE)
+    reported = []
+    for k in range(5):
+        s = dataclasses.replace(state(z=1.0 + k), angular_velocity_body_rad_s=(0.1 * k, 0.0, 0.0))
+        msgs = decode(encoder.encode(s, 4000 * k))
+        reported.append(
+            (
+                msgs["HIL_STATE_QUATERNION"][0].alt,
+                msgs["HIL_SENSOR"][0].xgyro,
+                msgs["HIL_SENSOR"][0].time_usec,
+            )
+        )
+    assert [alt for alt, _, _ in reported] == [29000, 29000, 29000, 30000, 31000]  # 2 steps late
+    assert [g for _, g, _ in reported] == pytest.approx([0.0, 0.0, 0.1, 0.2, 0.3])  # 1 step late
+    assert [t for _, _, t in reported] == [0, 4000, 8000, 12000, 16000]  # stamps stay current
