@@ -52,7 +52,13 @@ def cmd_sim(args: argparse.Namespace) -> int:
     server = SimServer(
         world,
         vehicle,
-        ServerOptions(host=args.host, port=args.port, speedup=args.speedup, timeout_s=args.timeout),
+        ServerOptions(
+            host=args.host,
+            port=args.port,
+            speedup=args.speedup,
+            timeout_s=args.timeout,
+            wait=args.wait,
+        ),
     )
     try:
         port = server.listen()
@@ -65,14 +71,103 @@ def cmd_sim(args: argparse.Namespace) -> int:
     print(f"groundfx sim: listening on tcp:{args.host}:{port}", flush=True)
     signal.signal(signal.SIGTERM, _terminate)
     try:
-        end = server.serve()
+        end = server.serve(lambda e: print(f"groundfx sim: {server.summary(str(e))}", flush=True))
     except KeyboardInterrupt:
         end = LinkEnded("stopped by signal")
     print(f"groundfx sim: {server.summary(str(end))}", flush=True)
     return 0 if end.clean else 1
 
 
+def _origin(text: str) -> tuple[float, float, float]:
+    try:
+        lat, lon, alt = (float(v) for v in text.split(","))
+    except ValueError:
+        raise ConfigError(f"--origin: expected LAT,LON,ALT, got {text!r}") from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180 and -500 <= alt <= 9000):
+        raise ConfigError(
+            f"--origin: lat in [-90, 90], lon in [-180, 180], alt in [-500, 9000] m; got {text!r}"
+        )
+    return (lat, lon, alt)
+
+
+def cmd_autopilot(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    import numpy as np
+
+    from autopilot.commander import CommanderParams
+    from autopilot.ground_models import make_model
+    from autopilot.metrics import COLUMNS
+    from autopilot.runner import AutopilotConfig, fly_mission
+    from autopilot.simlink import LinkLost, parse_url
+    from mission.missionfile import load_mission
+    from simbridge.vehicle import load_vehicle
+    from simbridge.world import load_world
+
+    try:
+        parse_url(args.sim)
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    mission, takeoff_altitude = load_mission(args.mission)
+    vehicle = load_vehicle(args.vehicle)
+    if args.origin:
+        origin = _origin(args.origin)
+    else:
+        o = load_world("default").origin
+        origin = (o.lat_deg, o.lon_deg, o.alt_m)
+    config = AutopilotConfig(
+        sim_url=args.sim,
+        mission=mission,
+        vehicle=vehicle,
+        model=make_model(args.model, vehicle, args.rho),
+        origin=origin,
+        commander=dataclasses.replace(CommanderParams(), takeoff_altitude_m=takeoff_altitude),
+    )
+    signal.signal(signal.SIGTERM, _terminate)
+    try:
+        flight = fly_mission(config)
+    except LinkLost as lost:
+        print(f"groundfx autopilot: {lost}", file=sys.stderr)
+        return 3
+    if args.trajectory:
+        args.trajectory.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(args.trajectory, log=flight.log, columns=np.array(COLUMNS))
+    summary = dict(flight.summary, rho=args.rho)
+    if args.json:
+        print(json.dumps(summary), flush=True)
+    else:
+        print(
+            f"groundfx autopilot: {flight.ended}; "
+            + ", ".join(
+                f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in summary.items()
+            )
+        )
+    if not flight.summary["landed"]:
+        print(f"groundfx autopilot: {flight.ended}", file=sys.stderr)
+        return 3
+    return 0
+
+
+def cmd_fly(args: argparse.Namespace) -> int:
+    from mission.fly import describe, fly
+
+    speedup = "max" if args.speedup is None else f"{args.speedup:g}"
+    summary = fly(
+        args.mission, args.world, args.model, args.rho, speedup, args.start, args.trajectory
+    )
+    print(json.dumps(summary) if args.json else describe(summary))
+    return 0 if summary["landed"] else 1
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
+    if args.target == "sitl":
+        from mission.bench import bench_sitl
+
+        result = bench_sitl(args.world)
+        print(
+            json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
+        )
+        return 0
     from simbridge.bench import bench_sim
 
     result = bench_sim(args.world, args.seconds)
@@ -121,6 +216,21 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _model_options(p: argparse.ArgumentParser, rho_default: float | None = 1.0) -> None:
+    p.add_argument(
+        "--model",
+        default="analytic",
+        choices=["none", "analytic", "neural"],
+        help="ground-effect model of the controller (default: analytic)",
+    )
+    p.add_argument(
+        "--rho",
+        type=float,
+        default=rho_default,
+        help="rho of the analytic model (fly's default: the world's rho_sim)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="groundfx",
@@ -151,6 +261,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=10.0,
         help="seconds to wait for an autopilot's reply in lockstep (default: 10)",
     )
+    p.add_argument(
+        "--wait",
+        action="store_true",
+        help="after an autopilot leaves, wait for the next one in a fresh world",
+    )
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser("bench", help="benchmarks that print figures")
@@ -164,6 +279,35 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", type=Path, help="also write the JSON to this file")
     b.set_defaults(func=cmd_bench)
 
+    b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")
+    b.add_argument("--world", default="default")
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser("autopilot", help="run the autopilot against a PX4-protocol simulator")
+    p.add_argument(
+        "--sim", default="tcp:127.0.0.1:4560", help="simulator URL (default: tcp:127.0.0.1:4560)"
+    )
+    p.add_argument("--mission", type=Path, required=True, help="mission YAML")
+    _model_options(p)
+    p.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
+    p.add_argument("--origin", metavar="LAT,LON,ALT", help="geodetic origin of the local frame")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
+    p.set_defaults(func=cmd_autopilot)
+
+    p = sub.add_parser("fly", help="fly a mission: simulator and autopilot processes in lockstep")
+    p.add_argument("mission", type=Path, help="mission YAML (see mission/examples)")
+    p.add_argument("--world", default="default", help="world YAML or packaged world name")
+    _model_options(p, rho_default=None)
+    p.add_argument(
+        "--speedup", type=_speedup, default=None, help="N times real time or 'max' (default)"
+    )
+    p.add_argument("--start", metavar="X,Y,Z", help="start position, overriding the world's")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
+    p.set_defaults(func=cmd_fly)
+
     p = sub.add_parser("plot", help="figures")
     plot_sub = p.add_subparsers(dest="figure", required=True, metavar="FIGURE")
     g = plot_sub.add_parser(
@@ -176,7 +320,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--out", type=Path, default=DEFAULT_LOGS / "ground_effect.png")
     g.set_defaults(func=cmd_plot)
 
-    p = sub.add_parser("demo", help="the main demo")
+    p = sub.add_parser("demo", help="the simulator demo: the ground effect lifts a drone")
     p.add_argument("--world", default="default")
     p.add_argument("--logs", type=Path, default=DEFAULT_LOGS)
     p.set_defaults(func=cmd_demo)

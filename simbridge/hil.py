@@ -1,7 +1,8 @@
 """The PX4 simulator protocol's messages: the vehicle state in, MAVLink bytes out, and back.
 
 Simulator -> autopilot, per control step: HIL_STATE_QUATERNION and HIL_SENSOR; ODOMETRY (a
-motion-capture pose, float precision), DISTANCE_SENSOR (downward range) and
+motion-capture pose, float precision), DISTANCE_SENSOR (downward range, whole cm) with
+HIL_OPTICAL_FLOW (a flow deck: flow and the same range in float metres) and
 ESC_TELEMETRY_1_TO_4 (actual rotor speeds, so motor lag is observable) at their world-file
 rates; HIL_GPS at 10 Hz; HIL_SENSOR always last. Autopilot -> simulator:
 HIL_ACTUATOR_CONTROLS. Units and frames (NED, FRD, degE7, mm, cm/s, mG, gauss, hPa) exist
@@ -57,6 +58,7 @@ def _int16(v: float) -> int:
 class ActuatorCommand:
     """One HIL_ACTUATOR_CONTROLS decoded: rotor speed commands and the flags that matter."""
 
+    time_us: int  # the sensor time it answers (PX4 stamps it with its lockstep clock)
     rotor_speeds_rad_s: tuple[float, float, float, float]
     armed: bool
     lockstep: bool
@@ -64,7 +66,7 @@ class ActuatorCommand:
 
 
 def decode_actuators(
-    controls: Sequence[float], mode: int, flags: int, vehicle: Vehicle
+    time_us: int, controls: Sequence[float], mode: int, flags: int, vehicle: Vehicle
 ) -> ActuatorCommand:
     """controls[ch] in [0, 1] is n / n_max of the rotor on channel ch; bad values are clamped."""
     clamped = 0
@@ -76,6 +78,7 @@ def decode_actuators(
             c = 0.0 if math.isnan(c) else min(max(c, 0.0), 1.0)
         speeds.append(c * vehicle.max_rotor_speed_rad_s)
     return ActuatorCommand(
+        time_us=time_us,
         rotor_speeds_rad_s=(speeds[0], speeds[1], speeds[2], speeds[3]),
         armed=bool(mode & ARMED_MODE),
         lockstep=bool(flags & LOCKSTEP_FLAG),
@@ -99,6 +102,7 @@ class HilEncoder:
         self._pack_distance = packer(mavlink.MAVLink_distance_sensor_message)
         self._pack_esc = packer(mavlink.MAVLink_esc_telemetry_1_to_4_message)
         self._pack_gps = packer(mavlink.MAVLink_hil_gps_message)
+        self._pack_flow = packer(mavlink.MAVLink_hil_optical_flow_message)
         fx = world.effects
         period = world.control_period_s
         self._imu_delay = (
@@ -140,6 +144,7 @@ class HilEncoder:
             parts.append(self._odometry(nav, time_us))
         if self._due("distance"):
             parts.append(self._distance(nav, time_us))
+            parts.append(self._flow(nav, time_us))
         if self._due("esc"):
             parts.append(self._esc(state))
         if self._due("gps"):
@@ -264,6 +269,34 @@ class HilEncoder:
             0.0,
             (0.0, 0.0, 0.0, 0.0),
             0,
+        )
+
+    def _flow(self, s: VehicleState, time_us: int) -> bytes:
+        """A downward flow-and-range deck (Crazyflie flow deck): the range in float metres.
+
+        Flow is integrated over the message interval from the current rates and velocity
+        (sensor frame = body FRD): x = (p - v_y / h) dt, y = (q + v_x / h) dt.
+        """
+        dt = self._every["distance"] * self.world.control_period_s
+        rates = flu_to_frd(s.angular_velocity_body_rad_s)
+        v = flu_to_frd(rotate_transposed(quat_to_matrix(s.quaternion), s.velocity_m_s))
+        h = s.range_m
+        known = math.isfinite(h) and h > 0.0
+        flow_x = (rates[0] - v[1] / h) * dt if known else 0.0
+        flow_y = (rates[1] + v[0] / h) * dt if known else 0.0
+        return self._pack_flow.pack(
+            time_us,
+            0,
+            round(dt * 1e6),
+            flow_x,
+            flow_y,
+            rates[0] * dt,
+            rates[1] * dt,
+            rates[2] * dt,
+            2000,
+            255 if known else 0,
+            0,
+            h if known else -1.0,
         )
 
     def _esc(self, s: VehicleState) -> bytes:

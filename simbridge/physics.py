@@ -154,7 +154,9 @@ class Simulation:
         x, y = start.xy_m
         z = start.altitude_m
         if z is None:  # rest on whatever surface is below the start point
-            hit = pb.rayTest([x, y, 1000.0], [x, y, -1.0], physicsClientId=cid)[0]
+            hit = pb.rayTest(
+                [x, y, 1000.0], [x, y, -1.0], collisionFilterMask=WORLD_GROUP, physicsClientId=cid
+            )[0]
             z = (hit[3][2] if hit[0] >= 0 else 0.0) + half[2]
         self.start_quaternion = quat_from_euler(
             math.radians(start.roll_deg), math.radians(start.pitch_deg), math.radians(start.yaw_deg)

@@ -28,6 +28,7 @@ class ServerOptions:
     port: int = 4560  # 0: an ephemeral port, printed when listening
     speedup: float | None = 1.0  # simulated seconds per wall second; None: as fast as possible
     timeout_s: float = 10.0  # longest wait for an autopilot's reply in lockstep
+    wait: bool = False  # after an autopilot leaves, wait for the next one (a fresh world)
 
 
 @dataclass
@@ -38,6 +39,7 @@ class LinkCounters:
     unknown: int = 0  # message ids outside the dialect
     ignored: int = 0  # valid messages the simulator has no use for
     clamped: int = 0  # actuator values NaN or outside [0, 1]
+    stale: int = 0  # lockstep replies to an earlier step than the last one sent
 
 
 SPIN_S = 0.0005  # longest busy-poll for a reply before sleeping in the kernel
@@ -77,21 +79,28 @@ class SimServer:
         self._listener = s
         return s.getsockname()[1]
 
-    def serve(self) -> LinkEnded:
-        """Accept one autopilot, run until it leaves or a wait times out; returns why it ended."""
+    def serve(self, on_end: Callable[[LinkEnded], None] | None = None) -> LinkEnded:
+        """Serve one autopilot (or, with `wait`, one after another, each in a fresh world)
+        until it leaves or a wait times out; returns why the last run ended."""
         if self._listener is None:
             self.listen()
         assert self._listener is not None
-        conn, _ = self._listener.accept()
-        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         try:
-            self._run(conn)
-        except LinkEnded as end:
-            return end
+            while True:
+                conn, _ = self._listener.accept()
+                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                self.counters = LinkCounters()
+                try:
+                    self._run(conn)
+                except LinkEnded as end:
+                    if not self.options.wait:
+                        return end
+                    if on_end is not None:
+                        on_end(end)
+                finally:
+                    conn.close()
         finally:
-            conn.close()
             self._listener.close()
-        raise AssertionError("the lockstep loop only ends by LinkEnded")
 
     def summary(self, reason: str) -> str:
         c = self.counters
@@ -115,13 +124,15 @@ class SimServer:
                 self._send(conn, encoder.encode(sim.state(), sim.time_us))
                 while True:
                     if command is None:  # before the first actuators: real-time pace, no waiting
-                        command = self._receive(conn, period, required=False)
+                        command = self._receive(conn, period, False)
                         if command is not None:
                             sim.release()
                     elif command.lockstep:
-                        command = self._receive(conn, options.timeout_s, required=True) or command
+                        command = (
+                            self._receive(conn, options.timeout_s, True, sim.time_us) or command
+                        )
                     else:
-                        command = self._receive(conn, 0.0, required=False) or command
+                        command = self._receive(conn, 0.0, False) or command
                     sim.step(command.rotor_speeds_rad_s if command else (0.0, 0.0, 0.0, 0.0))
                     self.counters.steps += 1
                     self.sim_time_s = sim.time_s
@@ -141,14 +152,16 @@ class SimServer:
             raise LinkEnded("autopilot disconnected") from None
 
     def _receive(
-        self, conn: socket.socket, wait_s: float, *, required: bool
+        self, conn: socket.socket, wait_s: float, required: bool, not_before_us: int = 0
     ) -> ActuatorCommand | None:
-        """The latest HIL_ACTUATOR_CONTROLS within `wait_s`; counts and drops everything else."""
+        """The latest HIL_ACTUATOR_CONTROLS answering a step at or after `not_before_us`,
+        within `wait_s`; counts and drops everything else, stale replies included (a reply
+        that arrives a step late must not leave the autopilot one step behind for good)."""
         if wait_s > 0.0:
             # Busy-poll briefly first: a lockstep reply usually comes within a few hundred
             # microseconds, and waking a sleeping process costs about 30 us on this kind of
             # machine, a sixth of the whole step at 20x real time.
-            command = self._poll(conn, SPIN_S)
+            command = self._poll(conn, SPIN_S, not_before_us)
             if command is not None:
                 return command
         deadline = time.perf_counter() + wait_s
@@ -167,11 +180,13 @@ class SimServer:
                 raise LinkEnded("autopilot disconnected") from None
             if not data:
                 raise LinkEnded("autopilot disconnected")
-            command = self._parse(data)
+            command = self._parse(data, not_before_us)
             if command is not None:
                 return command
 
-    def _poll(self, conn: socket.socket, spin_s: float) -> ActuatorCommand | None:
+    def _poll(
+        self, conn: socket.socket, spin_s: float, not_before_us: int
+    ) -> ActuatorCommand | None:
         conn.setblocking(False)
         end = time.perf_counter() + spin_s
         while time.perf_counter() < end:
@@ -183,32 +198,45 @@ class SimServer:
                 raise LinkEnded("autopilot disconnected") from None
             if not data:
                 raise LinkEnded("autopilot disconnected")
-            command = self._parse(data)
+            command = self._parse(data, not_before_us)
             if command is not None:
                 return command
         return None
 
-    def _parse(self, data: bytes) -> ActuatorCommand | None:
+    def _parse(self, data: bytes, not_before_us: int) -> ActuatorCommand | None:
         c = self.counters
-        if self._parser.buf_len() == 0:  # nothing pending: try the one-whole-frame fast path
-            fields = self._actuators.unpack(data)
-            if fields is not None:
-                c.actuator_messages += 1
-                command = decode_actuators(
-                    fields["controls"], fields["mode"], fields["flags"], self.vehicle
+        commands = []
+        fields = self._actuators.unpack(data) if self._parser.buf_len() == 0 else None
+        if fields is not None:  # the usual case: exactly one whole actuator frame
+            commands.append(
+                decode_actuators(
+                    fields["time_usec"],
+                    fields["controls"],
+                    fields["mode"],
+                    fields["flags"],
+                    self.vehicle,
                 )
-                c.clamped += command.clamped
-                return command
+            )
+        else:
+            for msg in self._parser.parse_buffer(data) or ():
+                if isinstance(msg, mavlink.MAVLink_hil_actuator_controls_message):
+                    commands.append(
+                        decode_actuators(
+                            msg.time_usec, msg.controls, msg.mode, msg.flags, self.vehicle
+                        )
+                    )
+                elif isinstance(msg, mavlink.MAVLink_bad_data):
+                    c.malformed += 1
+                elif isinstance(msg, mavlink.MAVLink_unknown):
+                    c.unknown += 1
+                else:
+                    c.ignored += 1
         latest = None
-        for msg in self._parser.parse_buffer(data) or ():
-            if isinstance(msg, mavlink.MAVLink_hil_actuator_controls_message):
-                latest = decode_actuators(msg.controls, msg.mode, msg.flags, self.vehicle)
-                c.actuator_messages += 1
-                c.clamped += latest.clamped
-            elif isinstance(msg, mavlink.MAVLink_bad_data):
-                c.malformed += 1
-            elif isinstance(msg, mavlink.MAVLink_unknown):
-                c.unknown += 1
+        for command in commands:
+            c.actuator_messages += 1
+            c.clamped += command.clamped
+            if command.time_us < not_before_us:
+                c.stale += 1
             else:
-                c.ignored += 1
+                latest = command
         return latest

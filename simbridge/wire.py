@@ -105,12 +105,16 @@ class WireUnpacker:
             != data[10 + length] | data[11 + length] << 8
         ):
             return None
-        payload = data[10 : 10 + length]
+        return self.decode_payload(data[10 : 10 + length])
+
+    def decode_payload(self, payload: bytes) -> dict[str, Any] | None:
+        """The fields of one payload (MAVLink 2 may have dropped its trailing zeros)."""
+        length = len(payload)
         if length < self._size:
-            payload += bytes(self._size - length)  # MAVLink 2 trailing-zero truncation
+            payload += bytes(self._size - length)
         elif length > self._size:
             return None
-        values = self._struct.unpack(payload[: self._size])
+        values = self._struct.unpack(payload)
         fields: dict[str, Any] = {}
         i = 0
         for name, count in self._layout:
@@ -121,3 +125,63 @@ class WireUnpacker:
                 fields[name] = values[i]
                 i += 1
         return fields
+
+
+class FrameReader:
+    """A byte stream into (message name, fields) pairs.
+
+    Unsigned MAVLink 2 frames of the given message types take a fast path (framing and CRC
+    checked here with pymavlink's metadata); anything else goes through pymavlink's robust
+    parser, whose bad-data and unknown-message verdicts are counted. Partial frames wait for
+    the next bytes.
+    """
+
+    def __init__(self, message_classes: list[Any], fallback: Any) -> None:
+        self._known = {cls.id: (cls.msgname, WireUnpacker(cls)) for cls in message_classes}
+        self._crc_extras = {cls.id: bytes([cls.crc_extra]) for cls in message_classes}
+        self._fallback = fallback  # a pymavlink MAVLink object with robust_parsing on
+        self._pending = b""
+        self.malformed = 0
+        self.unknown = 0
+
+    def feed(self, data: bytes) -> list[tuple[str, dict[str, Any]]]:
+        out: list[tuple[str, dict[str, Any]]] = []
+        if self._fallback.buf_len() > 0:  # pymavlink holds a partial frame: let it finish
+            self._slow(data, out)
+            return out
+        buf = self._pending + data if self._pending else data
+        self._pending = b""
+        i, n = 0, len(buf)
+        while i < n:
+            if buf[i] != MAVLINK2_STX or n - i < 10:
+                break
+            length = buf[i + 1]
+            msgid = buf[i + 7] | buf[i + 8] << 8 | buf[i + 9] << 16
+            known = self._known.get(msgid)
+            if known is None or buf[i + 2] != 0:  # another message, or signed
+                break
+            end = i + 12 + length
+            if end > n:  # a partial frame: wait for the rest
+                self._pending = buf[i:]
+                return out
+            crc = buf[end - 2] | buf[end - 1] << 8
+            if _crc(buf[i + 1 : i + 10 + length] + self._crc_extras[msgid]) != crc:
+                break
+            fields = known[1].decode_payload(buf[i + 10 : end - 2])
+            if fields is None:
+                break
+            out.append((known[0], fields))
+            i = end
+        if i < n:
+            self._slow(buf[i:], out)
+        return out
+
+    def _slow(self, data: bytes, out: list[tuple[str, dict[str, Any]]]) -> None:
+        for msg in self._fallback.parse_buffer(data) or ():
+            kind = msg.get_type()
+            if kind == "BAD_DATA":
+                self.malformed += 1
+            elif kind.startswith("UNKNOWN_"):
+                self.unknown += 1
+            else:
+                out.append((kind, {name: getattr(msg, name) for name in msg.get_fieldnames()}))

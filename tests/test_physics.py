@@ -117,7 +117,9 @@ def test_at_three_centimetres_free_air_hover_speed_accelerates_up_as_equation_3_
 
 def test_without_rotors_it_rests_on_the_ground_and_on_a_box():
     world = load_world("default")  # start altitude null: resting on the surface below
-    with Simulation(world, VEHICLE) as sim:
+    with Simulation(world, VEHICLE, held=True) as sim:
+        assert sim.state().position_m[2] == pytest.approx(0.0126, abs=1e-9)  # placed touching
+        sim.release()
         for _ in range(100):
             sim.step((0.0,) * 4)
         state = sim.state()
@@ -127,6 +129,7 @@ def test_without_rotors_it_rests_on_the_ground_and_on_a_box():
         load_world("obstacles"), start=dataclasses.replace(world.start, xy_m=(1.0, 0.0))
     )
     with Simulation(world, VEHICLE) as sim:
+        assert sim.state().position_m[2] == pytest.approx(0.1126, abs=1e-9)  # on the box top
         for _ in range(100):
             sim.step((0.0,) * 4)
         assert sim.state().position_m[2] == pytest.approx(0.1126, abs=2e-4)

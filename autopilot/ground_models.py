@@ -1,0 +1,93 @@
+"""Ground-effect models for the controller, chosen by name: `none`, `analytic`, `neural`.
+
+A model maps the thesis's 12 features (height above the surface, world velocity, attitude
+quaternion, rotor speeds) to the ground-effect force in the world frame [N].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+from simbridge.config import ConfigError
+from simbridge.effects.ground import cutoff_height_m, ground_effect_force_n
+from simbridge.frames import Quat, Vec3
+from simbridge.rotors import Quad
+from simbridge.vehicle import Vehicle
+
+MODEL_NAMES = ("none", "analytic", "neural")
+
+
+@dataclass(frozen=True)
+class GroundEffectInputs:
+    """The 12 features of thesis section 3.5."""
+
+    height_m: float  # centre of mass above the surface below
+    velocity_m_s: Vec3
+    quaternion: Quat
+    rotor_speeds_rad_s: Quad
+
+
+class GroundEffectModel(Protocol):
+    name: str
+
+    def predict(self, inputs: GroundEffectInputs) -> Vec3: ...
+
+
+@dataclass(frozen=True)
+class NoGroundEffect:
+    """The baseline: the controller ignores the ground effect."""
+
+    name: str = "none"
+
+    def predict(self, inputs: GroundEffectInputs) -> Vec3:
+        return (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class AnalyticGroundEffect:
+    """Equation 3.4 with a given rho, per rotor at its own height: the expert pilot."""
+
+    vehicle: Vehicle
+    rho: float
+    name: str = "analytic"
+
+    def __post_init__(self) -> None:
+        v = self.vehicle
+        object.__setattr__(self, "_rotors", v.rotor_positions_body_m())
+        object.__setattr__(self, "_cutoff", cutoff_height_m(self.rho, v.rotor_radius_m))
+
+    def predict(self, inputs: GroundEffectInputs) -> Vec3:
+        v = self.vehicle
+        c_t, radius, rho, cutoff = (
+            v.thrust_coefficient_n_s2,
+            v.rotor_radius_m,
+            self.rho,
+            self._cutoff,
+        )
+        w, x, y, z = inputs.quaternion
+        # the third row of the rotation matrix: how far each rotor sits above the centre
+        r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+        total = 0.0
+        for (rx, ry, rz), n in zip(self._rotors, inputs.rotor_speeds_rad_s, strict=True):
+            height = inputs.height_m + r20 * rx + r21 * ry + r22 * rz
+            total += ground_effect_force_n(c_t * n * n, height, rho, radius, cutoff)
+        return (0.0, 0.0, total)
+
+
+def make_model(
+    name: str, vehicle: Vehicle, rho: float = 1.0, network: Path | None = None
+) -> GroundEffectModel:
+    """The model called `name`; bad choices stop with a message naming the option."""
+    if name == "none":
+        return NoGroundEffect()
+    if name == "analytic":
+        if not 0.0 < rho <= 50.0:
+            raise ConfigError(f"--rho: {rho:g} is outside the allowed range (0, 50]")
+        return AnalyticGroundEffect(vehicle, rho)
+    if name == "neural":
+        raise ConfigError(
+            "--model neural: no network format exists yet; the learner (issue 5) brings it"
+        )
+    raise ConfigError(f"--model: unknown model {name!r}; choose one of {', '.join(MODEL_NAMES)}")

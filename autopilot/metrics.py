@@ -1,0 +1,73 @@
+"""Flight figures from a logged trajectory: landing error, hold error, touchdown speed, bounce."""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+
+# Holds at most this high above the surface count as "near the ground"; their error is taken
+# over the second half of each hold, once the approach has settled.
+NEAR_GROUND_M = 0.1
+COLUMNS = ("time_s", "x", "y", "z", "vx", "vy", "vz", "zd", "height", "mode")
+
+
+def flight_metrics(
+    log: np.ndarray,
+    modes: list[str],
+    landing_target_xy: tuple[float, float] | None,
+    resting_height_m: float,
+) -> dict[str, float | None]:
+    """`log` has one row per control step with COLUMNS; `mode` indexes `modes`."""
+    t, x, y, z, vz, zd, height = (
+        log[:, 0],
+        log[:, 1],
+        log[:, 2],
+        log[:, 3],
+        log[:, 6],
+        log[:, 7],
+        log[:, 8],
+    )
+    mode = log[:, 9].astype(int)
+    holding = (mode == modes.index("holding")) & (height <= NEAR_GROUND_M)
+    near = settled_halves(holding)
+    out: dict[str, float | None] = {
+        "hold_z_rms_error_m": float(np.sqrt(np.mean((z[near] - zd[near]) ** 2)))
+        if near.any()
+        else None,
+        "hold_z_max_error_m": float(np.max(np.abs(z[near] - zd[near]))) if near.any() else None,
+        "hold_z_mean_error_m": float(np.mean(z[near] - zd[near])) if near.any() else None,
+    }
+    # touchdown: the first step in contact (within 1 mm of resting) after the last flight;
+    # bounce: how far it rises again after that.
+    airborne = np.flatnonzero(height > resting_height_m + 0.02)
+    contact = np.flatnonzero(height <= resting_height_m + 0.001)
+    later = contact[contact > airborne[-1]] if airborne.size else contact[:0]
+    touchdown = int(later[0]) if later.size else None
+    if touchdown is not None:
+        out["touchdown_time_s"] = float(t[touchdown])
+        out["touchdown_speed_m_s"] = float(abs(vz[max(touchdown - 1, 0)]))
+        out["bounce_m"] = float(max(np.max(height[touchdown:]) - height[touchdown], 0.0))
+    else:
+        out.update(touchdown_time_s=None, touchdown_speed_m_s=None, bounce_m=None)
+    if landing_target_xy is not None and touchdown is not None:
+        out["landing_error_m"] = float(
+            np.hypot(x[-1] - landing_target_xy[0], y[-1] - landing_target_xy[1])
+        )
+    else:
+        out["landing_error_m"] = None
+    return out
+
+
+def settled_halves(mask: np.ndarray) -> np.ndarray:
+    """The second half of every run of True in `mask`: a hold once the approach has settled."""
+    out = np.zeros_like(mask)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    for start, stop in zip(edges[0::2], edges[1::2], strict=True):
+        out[(start + stop) // 2 : stop] = True
+    return out
+
+
+def trajectory_sha256(log: np.ndarray) -> str:
+    """A fingerprint of the flown trajectory: equal only if every logged value is equal."""
+    return hashlib.sha256(np.ascontiguousarray(log[:, :9]).tobytes()).hexdigest()

@@ -1,0 +1,202 @@
+"""The autopilot's flight loop: simulator link -> state -> commander -> model -> controller.
+
+One control step per HIL_SENSOR, answered with exactly one HIL_ACTUATOR_CONTROLS; the
+sensors' time is the only clock. The loop is the edge; every decision is a pure function.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from autopilot.commander import CommanderParams, CommanderState, Mission, Mode, command
+from autopilot.controller import ControllerParams, FlightState, control
+from autopilot.ground_models import GroundEffectInputs, GroundEffectModel
+from autopilot.metrics import COLUMNS, flight_metrics, trajectory_sha256
+from autopilot.simlink import LinkLost, SimLink, Step
+from simbridge.frames import (
+    Vec3,
+    frd_to_flu,
+    geodetic_to_local,
+    ned_to_enu,
+    quat_ned_frd_to_enu_flu,
+    quat_to_matrix,
+)
+from simbridge.vehicle import Vehicle
+
+MODES = [m.value for m in Mode]
+
+
+@dataclass(frozen=True)
+class AutopilotConfig:
+    sim_url: str
+    mission: Mission
+    vehicle: Vehicle
+    model: GroundEffectModel
+    origin: tuple[float, float, float]  # lat deg, lon deg, alt m of the local frame's origin
+    controller: ControllerParams = ControllerParams()
+    commander: CommanderParams = CommanderParams()
+    link_timeout_s: float = 1.0
+    settle_after_landing_s: float = 0.5  # keep logging after disarm, to see any bounce
+    max_flight_s: float = 900.0
+
+
+@dataclass
+class Flight:
+    log: np.ndarray
+    summary: dict[str, Any]
+    ended: str  # "landed", "mission time limit", or the lost link's reason
+    controller_us: list[float] = field(default_factory=list)
+
+
+def flight_state(step: Step, origin: tuple[float, float, float]) -> FlightState:
+    """Ground truth from HIL_STATE_QUATERNION in the local frame (x east, y north, z up)."""
+    s = step.latest["HIL_STATE_QUATERNION"]
+    east, north = geodetic_to_local(origin[0], origin[1], s["lat"] * 1e-7, s["lon"] * 1e-7)
+    return FlightState(
+        position_m=(east, north, s["alt"] * 1e-3 - origin[2]),
+        velocity_m_s=ned_to_enu((s["vx"] * 0.01, s["vy"] * 0.01, s["vz"] * 0.01)),
+        quaternion=quat_ned_frd_to_enu_flu(tuple(s["attitude_quaternion"])),
+        angular_velocity_body_rad_s=frd_to_flu((s["rollspeed"], s["pitchspeed"], s["yawspeed"])),
+    )
+
+
+def range_reading_m(step: Step) -> float | None:
+    """The newest downward range: the flow deck's float metres, else DISTANCE_SENSOR's cm."""
+    if "HIL_OPTICAL_FLOW" in step.new and step.latest["HIL_OPTICAL_FLOW"]["distance"] >= 0.0:
+        return float(step.latest["HIL_OPTICAL_FLOW"]["distance"])
+    if "DISTANCE_SENSOR" in step.new:
+        d = step.latest["DISTANCE_SENSOR"]
+        if d["min_distance"] <= d["current_distance"] <= d["max_distance"]:
+            return d["current_distance"] * 0.01
+    return None
+
+
+def estimate_height(
+    previous: float | None, reading_m: float | None, state: FlightState, dt_s: float
+) -> float:
+    """Height of the centre of mass above the surface below.
+
+    A range reading (along body -z) resets it; between readings it follows the vertical
+    velocity. Differencing the altitude instead would carry its 1 mm quantisation, which
+    near the cut-off moves a rho = 2 ground-effect estimate by tens of millinewtons.
+    Without a range sensor it is the altitude.
+    """
+    if reading_m is not None:
+        return reading_m * quat_to_matrix(state.quaternion)[8]
+    if previous is None:
+        return state.position_m[2]
+    return previous + state.velocity_m_s[2] * dt_s
+
+
+def fixed_point_step(previous: Vec3, target: Vec3, rotor_thrust_n: float) -> Vec3:
+    """The next ground-effect estimate, from the model's value at the last rotor speeds.
+
+    The estimate depends on the rotor speeds it helps choose: a fixed point. Fed straight
+    back (next = target) the iteration has slope -G, G = f_ge / T, and diverges once the
+    ground effect exceeds the thrust causing it (rho = 2 below 2.5 cm). Moving a fraction
+    1 / (1 + G) of the way gives slope 0 for an effect proportional to thrust, as equation
+    3.4 is: the fixed point in one step, and no lag where G is small.
+    """
+    gain = max(target[2], 0.0) / rotor_thrust_n if rotor_thrust_n > 0.0 else 0.0
+    beta = 1.0 / (1.0 + gain)
+    return (
+        previous[0] + beta * (target[0] - previous[0]),
+        previous[1] + beta * (target[1] - previous[1]),
+        previous[2] + beta * (target[2] - previous[2]),
+    )
+
+
+def fly_mission(config: AutopilotConfig, say: Callable[[str], None] = print) -> Flight:
+    vehicle = config.vehicle
+    resting_height = vehicle.body_size_m[2] / 2.0  # the range sensor sits at the centre of mass
+    channels = vehicle.actuator_channels
+    n_max = vehicle.max_rotor_speed_rad_s
+    rows: list[tuple[float, ...]] = []
+    timings: list[float] = []
+    speeds = (0.0, 0.0, 0.0, 0.0)
+    ge = (0.0, 0.0, 0.0)
+    height: float | None = None
+    last_t = 0.0
+    cmd_state: CommanderState | None = None
+    ended = "landed"
+    link = SimLink(config.sim_url, timeout_s=config.link_timeout_s)
+    wall0 = time.perf_counter()
+    try:
+        while True:
+            step = link.receive_step()
+            t_us = step.sensor["time_usec"]
+            t = t_us * 1e-6
+            state = flight_state(step, config.origin)
+            height = estimate_height(height, range_reading_m(step), state, t - last_t)
+            last_t = t
+            if cmd_state is None:
+                cmd_state = CommanderState(since_s=t)
+            cmd = command(
+                cmd_state,
+                config.mission,
+                config.commander,
+                t,
+                state.position_m,
+                height,
+                resting_height,
+            )
+            cmd_state = cmd.state
+            if cmd.setpoint is not None:
+                t0 = time.perf_counter()
+                target = config.model.predict(
+                    GroundEffectInputs(height, state.velocity_m_s, state.quaternion, speeds)
+                )
+                rotor_thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in speeds)
+                ge = fixed_point_step(ge, target, rotor_thrust)
+                speeds = control(
+                    state, cmd.setpoint, ge, vehicle, config.controller
+                ).rotor_speeds_rad_s
+                timings.append(time.perf_counter() - t0)
+            else:
+                speeds, ge = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+            link.send(t_us, tuple(n / n_max for n in speeds), channels, cmd.armed)
+            zd = cmd.setpoint.position_m[2] if cmd.setpoint is not None else math.nan
+            p, v = state.position_m, state.velocity_m_s
+            rows.append(
+                (t, p[0], p[1], p[2], v[0], v[1], v[2], zd, height, MODES.index(cmd_state.mode))
+            )
+            if (
+                cmd_state.mode == Mode.LANDED
+                and t - (cmd_state.touchdown_s or t) >= config.settle_after_landing_s
+            ):
+                break
+            if t >= config.max_flight_s:
+                ended = "mission time limit"
+                break
+    except LinkLost as lost:
+        ended = str(lost)
+    finally:
+        link.close()
+    wall = time.perf_counter() - wall0
+    log = np.asarray(rows, dtype=float).reshape(-1, len(COLUMNS))
+    last_xy = config.mission.waypoints[-1].position_m[:2] if config.mission.land else None
+    summary: dict[str, Any] = {"ended": ended, "landed": ended == "landed"}
+    if len(log):
+        summary.update(flight_metrics(log, MODES, last_xy, resting_height))
+        sim_s = float(log[-1, 0] - log[0, 0])
+        summary.update(
+            sim_s=sim_s,
+            wall_s=wall,
+            rtf=sim_s / wall if wall > 0 else 0.0,
+            steps=len(log),
+            trajectory_sha256=trajectory_sha256(log),
+        )
+    if timings:
+        us = np.asarray(timings) * 1e6
+        summary.update(
+            controller_us_p50=float(np.percentile(us, 50)),
+            controller_us_p99=float(np.percentile(us, 99)),
+        )
+    summary.update(model=config.model.name, malformed=link.malformed, unknown=link.unknown)
+    return Flight(log=log, summary=summary, ended=ended)
