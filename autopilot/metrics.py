@@ -6,8 +6,9 @@ import hashlib
 
 import numpy as np
 
-# Holds at most this high above the surface count as "near the ground"; their error is taken
-# over the second half of each hold, once the approach has settled.
+# Holds with a setpoint at most this high above the surface count as "near the ground"
+# (judged by the setpoint, so that a vehicle the ground effect keeps higher still counts);
+# their error is taken over the second half of each hold, once the approach has settled.
 NEAR_GROUND_M = 0.1
 COLUMNS = ("time_s", "x", "y", "z", "vx", "vy", "vz", "zd", "height", "mode")
 
@@ -29,7 +30,8 @@ def flight_metrics(
         log[:, 8],
     )
     mode = log[:, 9].astype(int)
-    holding = (mode == modes.index("holding")) & (height <= NEAR_GROUND_M)
+    setpoint_height = zd - z + height  # the setpoint above the surface under the vehicle
+    holding = (mode == modes.index("holding")) & (setpoint_height <= NEAR_GROUND_M)
     near = settled_halves(holding)
     out: dict[str, float | None] = {
         "hold_z_rms_error_m": float(np.sqrt(np.mean((z[near] - zd[near]) ** 2)))

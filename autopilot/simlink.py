@@ -17,15 +17,6 @@ from simbridge.hil import ARMED_MODE, LOCKSTEP_FLAG, mavlink
 from simbridge.wire import FrameReader, PacketSequence, WirePacker
 
 AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID = 1, 1
-STEP_MESSAGES = [
-    mavlink.MAVLink_hil_sensor_message,
-    mavlink.MAVLink_hil_state_quaternion_message,
-    mavlink.MAVLink_hil_gps_message,
-    mavlink.MAVLink_distance_sensor_message,
-    mavlink.MAVLink_hil_optical_flow_message,
-    mavlink.MAVLink_esc_telemetry_1_to_4_message,
-    mavlink.MAVLink_odometry_message,
-]
 
 
 SPIN_S = 0.0005
@@ -67,9 +58,7 @@ class SimLink:
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._sock.settimeout(timeout_s)
         self._timeout_s = timeout_s
-        fallback = mavlink.MAVLink(None)
-        fallback.robust_parsing = True
-        self._reader = FrameReader(STEP_MESSAGES, fallback)
+        self._reader = FrameReader(mavlink)
         self._queue: list[tuple[str, dict[str, Any]]] = []
         self._latest: dict[str, dict[str, Any]] = {}
         self._pack = WirePacker(
@@ -103,11 +92,15 @@ class SimLink:
                     self._sock.settimeout(self._timeout_s)
                     data = self._sock.recv(65536)
             except TimeoutError:
-                raise LinkLost(f"no data from the simulator for {self._timeout_s:g} s") from None
+                raise LinkLost(
+                    f"lost the simulator link: no data for {self._timeout_s:g} s"
+                ) from None
             except OSError as err:
-                raise LinkLost(f"simulator link failed: {err.strerror}") from None
+                raise LinkLost(
+                    f"lost the simulator link: {(err.strerror or str(err)).lower()}"
+                ) from None
             if not data:
-                raise LinkLost("the simulator closed the link")
+                raise LinkLost("lost the simulator link: it closed the connection")
             self._queue.extend(self._reader.feed(data))
 
     def _poll(self) -> bytes | None:
@@ -140,7 +133,7 @@ class SimLink:
             self._sock.settimeout(self._timeout_s)
             self._sock.sendall(self._pack.pack(time_us, c, mode, LOCKSTEP_FLAG))
         except OSError:
-            raise LinkLost("the simulator closed the link") from None
+            raise LinkLost("lost the simulator link: it closed the connection") from None
 
     def close(self) -> None:
         self._sock.close()

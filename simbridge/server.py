@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from simbridge.hil import ActuatorCommand, HilEncoder, decode_actuators, mavlink
 from simbridge.physics import Simulation
 from simbridge.vehicle import Vehicle
-from simbridge.wire import WireUnpacker
+from simbridge.wire import FrameReader
 from simbridge.world import World
 
 
@@ -63,9 +63,7 @@ class SimServer:
     ) -> None:
         self.world, self.vehicle, self.options, self.say = world, vehicle, options, say
         self.counters = LinkCounters()
-        self._parser = mavlink.MAVLink(None)
-        self._parser.robust_parsing = True
-        self._actuators = WireUnpacker(mavlink.MAVLink_hil_actuator_controls_message)
+        self._reader = FrameReader(mavlink)
         self._listener: socket.socket | None = None
         self.sim_time_s = 0.0
         self.wall_s = 0.0
@@ -89,7 +87,7 @@ class SimServer:
             while True:
                 conn, _ = self._listener.accept()
                 conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                self.counters = LinkCounters()
+                self.counters, self._reader = LinkCounters(), FrameReader(mavlink)
                 try:
                     self._run(conn)
                 except LinkEnded as end:
@@ -204,39 +202,24 @@ class SimServer:
         return None
 
     def _parse(self, data: bytes, not_before_us: int) -> ActuatorCommand | None:
-        c = self.counters
-        commands = []
-        fields = self._actuators.unpack(data) if self._parser.buf_len() == 0 else None
-        if fields is not None:  # the usual case: exactly one whole actuator frame
-            commands.append(
-                decode_actuators(
-                    fields["time_usec"],
-                    fields["controls"],
-                    fields["mode"],
-                    fields["flags"],
-                    self.vehicle,
-                )
-            )
-        else:
-            for msg in self._parser.parse_buffer(data) or ():
-                if isinstance(msg, mavlink.MAVLink_hil_actuator_controls_message):
-                    commands.append(
-                        decode_actuators(
-                            msg.time_usec, msg.controls, msg.mode, msg.flags, self.vehicle
-                        )
-                    )
-                elif isinstance(msg, mavlink.MAVLink_bad_data):
-                    c.malformed += 1
-                elif isinstance(msg, mavlink.MAVLink_unknown):
-                    c.unknown += 1
-                else:
-                    c.ignored += 1
+        c, reader = self.counters, self._reader
         latest = None
-        for command in commands:
+        for kind, fields in reader.feed(data):
+            if kind != "HIL_ACTUATOR_CONTROLS":
+                c.ignored += 1
+                continue
+            command = decode_actuators(
+                fields["time_usec"],
+                fields["controls"],
+                fields["mode"],
+                fields["flags"],
+                self.vehicle,
+            )
             c.actuator_messages += 1
             c.clamped += command.clamped
             if command.time_us < not_before_us:
                 c.stale += 1
             else:
                 latest = command
+        c.malformed, c.unknown = reader.malformed, reader.unknown
         return latest

@@ -78,34 +78,14 @@ class WirePacker:
 
 
 class WireUnpacker:
-    """Decodes one message type from a buffer holding exactly one whole, valid, unsigned frame.
-
-    Anything else (partial frames, other messages, bad CRC, signed packets) returns None, and
-    the caller hands the bytes to pymavlink's robust parser instead.
-    """
+    """Decodes the payload of one message type with pymavlink's layout."""
 
     def __init__(self, message_class: Any) -> None:
         self._struct = message_class.unpacker
         self._size = message_class.unpacker.size
-        self._crc_extra = bytes([message_class.crc_extra])
-        self._msgid = message_class.id
         self._layout = tuple(
             zip(message_class.ordered_fieldnames, message_class.array_lengths, strict=True)
         )
-
-    def unpack(self, data: bytes) -> dict[str, Any] | None:
-        n = len(data)
-        if n < 12 or data[0] != MAVLINK2_STX or data[2] != 0:  # incompat_flags 0: unsigned
-            return None
-        length = data[1]
-        if n != 12 + length or data[7] | data[8] << 8 | data[9] << 16 != self._msgid:
-            return None
-        if (
-            _crc(data[1 : 10 + length] + self._crc_extra)
-            != data[10 + length] | data[11 + length] << 8
-        ):
-            return None
-        return self.decode_payload(data[10 : 10 + length])
 
     def decode_payload(self, payload: bytes) -> dict[str, Any] | None:
         """The fields of one payload (MAVLink 2 may have dropped its trailing zeros)."""
@@ -127,61 +107,99 @@ class WireUnpacker:
         return fields
 
 
-class FrameReader:
-    """A byte stream into (message name, fields) pairs.
+SIGNED_FLAG = 0x01
+SIGNATURE_LEN = 13
+_PARTIAL = object()
 
-    Unsigned MAVLink 2 frames of the given message types take a fast path (framing and CRC
-    checked here with pymavlink's metadata); anything else goes through pymavlink's robust
-    parser, whose bad-data and unknown-message verdicts are counted. Partial frames wait for
-    the next bytes.
+
+class FrameReader:
+    """A MAVLink 2 byte stream into (message name, fields) pairs, resynchronising after noise.
+
+    Every frame is checked against its CRC with the dialect's CRC extra. After noise, a bad
+    CRC or a message id outside the dialect, reading resumes at the next byte, so a broken
+    header cannot swallow the real frames behind it; in lockstep a swallowed tick would stall
+    both ends. A frame that looks incomplete is taken for noise when a whole valid frame
+    follows it in the bytes already received. Counts: `malformed` (noise runs and frames
+    failing their CRC), `unknown` (ids outside the dialect).
     """
 
-    def __init__(self, message_classes: list[Any], fallback: Any) -> None:
-        self._known = {cls.id: (cls.msgname, WireUnpacker(cls)) for cls in message_classes}
-        self._crc_extras = {cls.id: bytes([cls.crc_extra]) for cls in message_classes}
-        self._fallback = fallback  # a pymavlink MAVLink object with robust_parsing on
+    def __init__(self, dialect: Any) -> None:
+        self._classes = dialect.mavlink_map  # msgid -> pymavlink message class
+        self._unpackers: dict[int, tuple[str, bytes, WireUnpacker]] = {}
         self._pending = b""
         self.malformed = 0
         self.unknown = 0
 
+    def _known(self, msgid: int) -> tuple[str, bytes, WireUnpacker] | None:
+        entry = self._unpackers.get(msgid)
+        if entry is None:
+            cls = self._classes.get(msgid)
+            if cls is None:
+                return None
+            entry = (cls.msgname, bytes([cls.crc_extra]), WireUnpacker(cls))
+            self._unpackers[msgid] = entry
+        return entry
+
+    def _frame(self, buf: bytes, i: int) -> Any:
+        """(name, fields, end) for a valid frame at i; _PARTIAL if cut short; None if invalid."""
+        n = len(buf)
+        if n - i < 10:
+            return _PARTIAL
+        length, flags = buf[i + 1], buf[i + 2]
+        if flags & ~SIGNED_FLAG:
+            return None
+        msgid = buf[i + 7] | buf[i + 8] << 8 | buf[i + 9] << 16
+        known = self._known(msgid)
+        if known is None:
+            self.unknown += 1
+            return None
+        end = i + 12 + length
+        if end + (SIGNATURE_LEN if flags & SIGNED_FLAG else 0) > n:
+            return _PARTIAL
+        name, crc_extra, unpacker = known
+        if _crc(buf[i + 1 : i + 10 + length] + crc_extra) != buf[end - 2] | buf[end - 1] << 8:
+            self.malformed += 1
+            return None
+        fields = unpacker.decode_payload(buf[i + 10 : end - 2])
+        if fields is None:
+            self.malformed += 1
+            return None
+        return name, fields, end + (SIGNATURE_LEN if flags & SIGNED_FLAG else 0)
+
+    def _next_valid(self, buf: bytes, i: int) -> int | None:
+        while (j := buf.find(MAVLINK2_STX, i)) >= 0:
+            unknown, malformed = self.unknown, self.malformed
+            frame = self._frame(buf, j)
+            self.unknown, self.malformed = unknown, malformed  # only looking ahead
+            if frame is not None and frame is not _PARTIAL:
+                return j
+            i = j + 1
+        return None
+
     def feed(self, data: bytes) -> list[tuple[str, dict[str, Any]]]:
         out: list[tuple[str, dict[str, Any]]] = []
-        if self._fallback.buf_len() > 0:  # pymavlink holds a partial frame: let it finish
-            self._slow(data, out)
-            return out
         buf = self._pending + data if self._pending else data
         self._pending = b""
         i, n = 0, len(buf)
         while i < n:
-            if buf[i] != MAVLINK2_STX or n - i < 10:
+            j = buf.find(MAVLINK2_STX, i)
+            if j < 0:
+                self.malformed += 1  # a run of noise to the end
                 break
-            length = buf[i + 1]
-            msgid = buf[i + 7] | buf[i + 8] << 8 | buf[i + 9] << 16
-            known = self._known.get(msgid)
-            if known is None or buf[i + 2] != 0:  # another message, or signed
-                break
-            end = i + 12 + length
-            if end > n:  # a partial frame: wait for the rest
-                self._pending = buf[i:]
-                return out
-            crc = buf[end - 2] | buf[end - 1] << 8
-            if _crc(buf[i + 1 : i + 10 + length] + self._crc_extras[msgid]) != crc:
-                break
-            fields = known[1].decode_payload(buf[i + 10 : end - 2])
-            if fields is None:
-                break
-            out.append((known[0], fields))
-            i = end
-        if i < n:
-            self._slow(buf[i:], out)
-        return out
-
-    def _slow(self, data: bytes, out: list[tuple[str, dict[str, Any]]]) -> None:
-        for msg in self._fallback.parse_buffer(data) or ():
-            kind = msg.get_type()
-            if kind == "BAD_DATA":
+            if j > i:
+                self.malformed += 1  # a run of noise before the next start byte
+                i = j
+            frame = self._frame(buf, i)
+            if frame is None:
+                i += 1
+            elif frame is _PARTIAL:
+                later = self._next_valid(buf, i + 1)
+                if later is None:
+                    self._pending = buf[i:]
+                    break
                 self.malformed += 1
-            elif kind.startswith("UNKNOWN_"):
-                self.unknown += 1
+                i = later
             else:
-                out.append((kind, {name: getattr(msg, name) for name in msg.get_fieldnames()}))
+                name, fields, i = frame
+                out.append((name, fields))
+        return out

@@ -1,0 +1,126 @@
+"""The controller of thesis section 3.4 as a pure function."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from autopilot.controller import ControllerParams, FlightState, Setpoint, control
+from autopilot.ground_models import AnalyticGroundEffect, GroundEffectInputs, make_model
+from autopilot.runner import fixed_point_step
+from simbridge.config import ConfigError
+from simbridge.effects.ground import ground_effect_force_n
+from simbridge.frames import quat_from_euler
+from simbridge.rotors import rotor_forces_n, thrust_and_moments
+from simbridge.vehicle import GRAVITY_M_S2, load_vehicle
+
+V = load_vehicle()
+P = ControllerParams()
+LEVEL = FlightState((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+def applied(out):
+    return thrust_and_moments(
+        rotor_forces_n(V.thrust_coefficient_n_s2, out.rotor_speeds_rad_s),
+        V.arm_m,
+        V.yaw_moment_coefficient_m,
+    )
+
+
+def test_at_the_setpoint_it_commands_the_hover_speed():
+    out = control(LEVEL, Setpoint((0.0, 0.0, 1.0)), (0.0, 0.0, 0.0), V, P)
+    assert out.rotor_speeds_rad_s == pytest.approx((V.hover_rotor_speed_rad_s,) * 4)
+    assert out.moments_n_m == pytest.approx((0.0, 0.0, 0.0))
+
+
+def test_equation_3_7_and_3_11_thrust():
+    state = FlightState((0.0, 0.0, 1.0), (0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    out = control(state, Setpoint((0.0, 0.0, 1.2)), (0.0, 0.0, 0.0), V, P)
+    az = 1.0 * 0.2 + 2.0 * (0.0 - 0.5)  # a0 (z_d - z) + a1 (v_d - v)
+    assert out.commanded_acceleration_m_s2[2] == pytest.approx(az)
+    assert out.thrust_n == pytest.approx(V.mass_kg * (az + GRAVITY_M_S2))
+    assert applied(out)[0] == pytest.approx(out.thrust_n)
+
+
+def test_a_ground_effect_estimate_is_subtracted_from_the_thrust():
+    without = control(LEVEL, Setpoint((0.0, 0.0, 1.0)), (0.0, 0.0, 0.0), V, P)
+    with_ge = control(LEVEL, Setpoint((0.0, 0.0, 1.0)), (0.0, 0.0, 0.2), V, P)
+    assert without.thrust_n - with_ge.thrust_n == pytest.approx(0.2)
+
+
+def test_tilt_commands_point_the_thrust_toward_the_setpoint():
+    forward = control(LEVEL, Setpoint((1.0, 0.0, 1.0)), (0.0, 0.0, 0.0), V, P)
+    assert forward.desired_pitch_rad == pytest.approx(math.atan(1.0 / GRAVITY_M_S2))  # (3.12)
+    assert forward.moments_n_m[1] > 0  # pitch toward +theta: thrust tilts forward
+    left = control(LEVEL, Setpoint((0.0, 1.0, 1.0)), (0.0, 0.0, 0.0), V, P)
+    assert left.desired_roll_rad == pytest.approx(math.atan(1.0 / -GRAVITY_M_S2))  # (3.13)
+    assert left.moments_n_m[0] < 0
+    # facing north (yaw 90 deg), "forward" is +y: an eastward setpoint is to its right
+    north = FlightState(
+        (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), quat_from_euler(0.0, 0.0, math.pi / 2), (0.0, 0.0, 0.0)
+    )
+    east = control(north, Setpoint((1.0, 0.0, 1.0), yaw_rad=math.pi / 2), (0.0, 0.0, 0.0), V, P)
+    assert east.desired_roll_rad > 0 and abs(east.desired_pitch_rad) < 1e-12
+
+
+def test_lateral_ground_effect_estimate_is_compensated_by_tilt():
+    pushed = control(LEVEL, Setpoint((0.0, 0.0, 1.0)), (0.056, 0.0, 0.0), V, P)  # 1 m/s^2 east
+    assert pushed.desired_pitch_rad == pytest.approx(math.atan(-1.0 / GRAVITY_M_S2))
+
+
+def test_attitude_feedback_linearisation_gives_the_commanded_angular_acceleration():
+    tilted = FlightState(
+        (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), quat_from_euler(0.1, 0.0, 0.0), (0.0, 0.0, 0.0)
+    )
+    out = control(tilted, Setpoint((0.0, 0.0, 1.0)), (0.0, 0.0, 0.0), V, P)
+    # at rest, (3.14): phi'' = k_p (phi_dc - phi); (3.15): M_x = I_xx phi''
+    assert out.moments_n_m[0] == pytest.approx(
+        V.inertia_kg_m2[0] * P.attitude_p * (out.desired_roll_rad - 0.1)
+    )
+
+
+def test_saturation_keeps_rotor_speeds_in_range():
+    far = control(LEVEL, Setpoint((0.0, 0.0, 100.0)), (0.0, 0.0, 0.0), V, P)
+    assert all(0.0 <= n <= V.max_rotor_speed_rad_s for n in far.rotor_speeds_rad_s)
+    falling = control(LEVEL, Setpoint((0.0, 0.0, -100.0)), (0.0, 0.0, 0.0), V, P)
+    assert all(0.0 <= n <= V.max_rotor_speed_rad_s for n in falling.rotor_speeds_rad_s)
+
+
+def test_analytic_model_is_equation_3_4_per_rotor():
+    model = AnalyticGroundEffect(V, 2.0)
+    n = 70.0
+    f = model.predict(GroundEffectInputs(0.05, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (n,) * 4))
+    assert f == pytest.approx(
+        (
+            0.0,
+            0.0,
+            4 * ground_effect_force_n(V.thrust_coefficient_n_s2 * n * n, 0.05, 2.0, 0.047, 0.02),
+        )
+    )
+    # rolled right: the left rotors (0, 1) sit higher, and feel less
+    rolled = quat_from_euler(0.2, 0.0, 0.0)
+    f_rolled = model.predict(GroundEffectInputs(0.05, (0.0, 0.0, 0.0), rolled, (n,) * 4))
+    assert f_rolled[2] > f[2]  # the lower rotors gain more than the higher ones lose
+    assert make_model("none", V).predict(
+        GroundEffectInputs(0.03, (0, 0, 0), (1, 0, 0, 0), (n,) * 4)
+    ) == (0.0, 0.0, 0.0)
+
+
+def test_model_choice_errors_name_the_option():
+    with pytest.raises(ConfigError, match="--model neural"):
+        make_model("neural", V)
+    with pytest.raises(ConfigError, match=r"--rho: -1 is outside the allowed range \(0, 50\]"):
+        make_model("analytic", V, -1.0)
+
+
+def test_the_ground_effect_fixed_point_converges_where_straight_feedback_diverges():
+    """With rho = 2 at the cut-off the effect is 2.2 times the thrust causing it."""
+    gain, need = 2.23, 0.5  # f_ge = gain * T; the controller needs T + f_ge = need
+    straight = estimate = 0.0
+    for _ in range(20):
+        straight = gain * (need - straight)  # next estimate from the thrust just chosen
+        thrust = need - estimate
+        estimate = fixed_point_step((0.0, 0.0, estimate), (0.0, 0.0, gain * thrust), thrust)[2]
+    assert estimate == pytest.approx(need * gain / (1 + gain), rel=1e-9)
+    assert abs(straight) > 100  # the thesis's plain feedback oscillates ever wider

@@ -1,0 +1,200 @@
+"""Flights: `groundfx sim` and `groundfx autopilot` as processes, in lockstep over MAVLink."""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mission.fly import fly
+from simbridge.launch import finish, start_sim
+from tests.helpers import REPO, run_groundfx
+
+EXAMPLES = REPO / "mission" / "examples"
+
+
+def autopilot(port: int, mission: str, *extra: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "mission.cli",
+            "autopilot",
+            "--sim",
+            f"tcp:127.0.0.1:{port}",
+            "--mission",
+            str(EXAMPLES / mission),
+            *extra,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def test_hover_at_one_metre_holds_within_a_centimetre(tmp_path):
+    summary = fly(EXAMPLES / "hover.yaml", trajectory=tmp_path / "t.npz")
+    assert summary["landed"]
+    log = np.load(tmp_path / "t.npz")["log"]
+    t, x, y, z, mode = log[:, 0], log[:, 1], log[:, 2], log[:, 3], log[:, 9]
+    holding = np.flatnonzero(mode == 4)
+    settled = holding[t[holding] >= t[holding[0]] + 3.0]  # after 3 s of the 10 s hold
+    assert settled.size > 1000
+    assert np.max(np.abs(z[settled] - 1.0)) < 0.01
+    assert np.max(np.hypot(x[settled], y[settled])) < 0.01
+
+
+def test_holding_3_cm_over_rho_2_ground_analytic_beats_none_by_far():
+    analytic = fly(EXAMPLES / "low_hover.yaml", world="rho2", model="analytic")
+    none = fly(EXAMPLES / "low_hover.yaml", world="rho2", model="none")
+    assert analytic["landed"] and none["landed"] and analytic["rho"] == 2.0
+    assert analytic["hold_z_rms_error_m"] < 0.005 and analytic["hold_z_max_error_m"] < 0.005
+    assert none["hold_z_rms_error_m"] > 0.02
+    assert none["hold_z_rms_error_m"] > 10 * analytic["hold_z_rms_error_m"]
+    assert analytic["bounce_m"] < 0.001 and analytic["touchdown_speed_m_s"] < 0.2
+    assert analytic["landing_error_m"] < 0.02
+
+
+def test_landing_on_a_box_measures_the_ground_effect_to_the_box(tmp_path):
+    summary = fly(EXAMPLES / "land_on_box.yaml", world="obstacles", trajectory=tmp_path / "t.npz")
+    assert summary["landed"] and summary["landing_error_m"] < 0.02
+    assert summary["hold_z_rms_error_m"] < 0.005  # 3 cm above the box top
+    log = np.load(tmp_path / "t.npz")["log"]
+    assert log[-1, 3] == pytest.approx(0.1 + 0.0126, abs=0.002)  # resting on the box
+    assert log[-1, 8] == pytest.approx(0.0126, abs=0.001)  # its height is measured to the box
+
+
+def test_the_same_mission_twice_flies_the_same_trajectory():
+    first = fly(EXAMPLES / "demo.yaml", world="rho2")
+    second = fly(EXAMPLES / "demo.yaml", world="rho2")
+    assert first["landed"] and first["steps"] == second["steps"]
+    assert first["trajectory_sha256"] == second["trajectory_sha256"]
+
+
+def test_fly_json_reports_the_figures():
+    result = run_groundfx("fly", str(EXAMPLES / "low_hover.yaml"), "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout.strip().splitlines()[-1])
+    for key in (
+        "landing_error_m",
+        "touchdown_speed_m_s",
+        "sim_s",
+        "wall_s",
+        "rtf",
+        "hold_z_rms_error_m",
+        "controller_us_p50",
+    ):
+        assert isinstance(summary[key], float), key
+    assert summary["sim_s"] > 15 and summary["rtf"] > 1
+
+
+def test_a_killed_simulator_ends_the_autopilot_within_a_second_with_its_log(tmp_path):
+    sim, port = start_sim("default", speedup="1")
+    trajectory = tmp_path / "t.npz"
+    ap = autopilot(port, "hover.yaml", "--trajectory", str(trajectory))
+    time.sleep(2.0)  # flying, in real time
+    assert ap.poll() is None
+    sim.send_signal(signal.SIGKILL)
+    t0 = time.monotonic()
+    _, err = ap.communicate(timeout=10)
+    assert time.monotonic() - t0 < 1.0
+    sim.communicate()
+    assert ap.returncode == 3 and "lost the simulator link" in err
+    log = np.load(trajectory)["log"]
+    assert 1.0 < log[-1, 0] < 3.0 and np.max(log[:, 3]) > 0.1  # it flew until the kill
+
+
+def test_a_killed_autopilot_ends_the_simulator_cleanly():
+    sim, port = start_sim("default", speedup="1")
+    ap = autopilot(port, "hover.yaml")
+    time.sleep(1.0)
+    ap.send_signal(signal.SIGKILL)
+    ap.communicate()
+    line = finish(sim)
+    assert sim.returncode == 0 and "autopilot disconnected" in line
+
+
+def test_with_wait_the_simulator_takes_the_next_autopilot_in_a_fresh_world():
+    sim, port = start_sim("default", speedup="max", extra=["--wait"])
+    try:
+        first = autopilot(port, "hover.yaml")
+        time.sleep(0.5)
+        first.send_signal(signal.SIGKILL)
+        first.communicate()
+        second = autopilot(port, "low_hover.yaml", "--json")
+        out, err = second.communicate(timeout=120)
+        assert second.returncode == 0, err
+        assert json.loads(out.strip().splitlines()[-1])["landed"]
+    finally:
+        sim.send_signal(signal.SIGTERM)
+        out, _ = sim.communicate(timeout=10)
+    ends = [ln for ln in out.splitlines() if "autopilot disconnected" in ln]
+    assert len(ends) == 2 and sim.returncode == 0
+
+
+class GarbageProxy:
+    """A TCP relay between autopilot and simulator that slips garbage into the sensor stream."""
+
+    def __init__(self, sim_port: int) -> None:
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.port = self.listener.getsockname()[1]
+        self.sim_port = sim_port
+        self.injected = 0
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    def _serve(self) -> None:
+        client, _ = self.listener.accept()
+        upstream = socket.create_connection(("127.0.0.1", self.sim_port))
+        for s in (client, upstream):
+            s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        threading.Thread(target=self._pipe, args=(client, upstream, False), daemon=True).start()
+        self._pipe(upstream, client, True)
+
+    def _pipe(self, src: socket.socket, dst: socket.socket, dirty: bool) -> None:
+        chunks = 0
+        try:
+            while data := src.recv(65536):
+                chunks += 1
+                if dirty and chunks % 50 == 0:
+                    dst.sendall(b"\x00\x13 line noise \xfd\x05\x00")  # noise, then a broken frame
+                    self.injected += 1
+                dst.sendall(data)
+        except OSError:
+            pass
+        finally:
+            dst.close()
+
+
+def test_garbage_on_the_link_is_counted_and_the_flight_goes_on():
+    sim, port = start_sim("default", speedup="max")
+    proxy = GarbageProxy(port)
+    ap = autopilot(proxy.port, "low_hover.yaml", "--json")
+    out, err = ap.communicate(timeout=120)
+    finish(sim)
+    assert ap.returncode == 0, err
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["landed"] and proxy.injected > 50
+    assert summary["malformed"] >= proxy.injected
+
+
+def test_bench_sitl_prints_its_figures():
+    result = run_groundfx("bench", "sitl", "--json")
+    assert result.returncode == 0, result.stderr
+    figures = json.loads(result.stdout.strip().splitlines()[-1])
+    assert figures["rtf"] > 1 and 0 < figures["controller_us_p50"] <= figures["controller_us_p99"]
+
+
+def test_a_bad_mission_is_refused_with_a_message(tmp_path: Path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("waypoints:\n  - {position_m: [0, 0], hold_s: 1}\n")
+    result = run_groundfx("fly", str(bad))
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert "waypoints[0].position_m: expected a list of 3 values" in result.stderr
