@@ -210,10 +210,14 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from simbridge.demo import run_demo
+    if args.lift:
+        from simbridge.demo import run_demo
 
-    run_demo(args.world, args.logs)
-    return 0
+        run_demo(args.world or "default", args.logs)
+        return 0
+    from mission.demo import run_flight_demo
+
+    return 0 if run_flight_demo(args.world or "rho2", args.logs) else 1
 
 
 def _model_options(p: argparse.ArgumentParser, rho_default: float | None = 1.0) -> None:
@@ -320,9 +324,14 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--out", type=Path, default=DEFAULT_LOGS / "ground_effect.png")
     g.set_defaults(func=cmd_plot)
 
-    p = sub.add_parser("demo", help="the simulator demo: the ground effect lifts a drone")
-    p.add_argument("--world", default="default")
+    p = sub.add_parser("demo", help="the demo flight (analytic model against none)")
+    p.add_argument("--world", help="world YAML or packaged name (default: rho2; --lift: default)")
     p.add_argument("--logs", type=Path, default=DEFAULT_LOGS)
+    p.add_argument(
+        "--lift",
+        action="store_true",
+        help="the simulator alone: the ground effect lifts a drone at hover speed",
+    )
     p.set_defaults(func=cmd_demo)
     return parser
 
