@@ -43,6 +43,7 @@ LOCKSTEP_FLAG = 1  # HIL_ACTUATOR_CONTROLS.flags bit 0
 ARMED_MODE = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 UNKNOWN_COVARIANCE = [math.nan] + [0.0] * 20
 RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
+TRUTH_NAME = b"GE_TRUE"  # DEBUG_VECT carrying the true ground-effect force
 
 
 def pressure_hpa(altitude_amsl_m: float) -> float:
@@ -103,6 +104,7 @@ class HilEncoder:
         self._pack_esc = packer(mavlink.MAVLink_esc_telemetry_1_to_4_message)
         self._pack_gps = packer(mavlink.MAVLink_hil_gps_message)
         self._pack_flow = packer(mavlink.MAVLink_hil_optical_flow_message)
+        self._pack_debug = packer(mavlink.MAVLink_debug_vect_message)
         fx = world.effects
         period = world.control_period_s
         self._imu_delay = (
@@ -126,6 +128,7 @@ class HilEncoder:
             "odometry": world.every_steps(rates.odometry_hz),
             "distance": world.every_steps(rates.distance_sensor_hz),
             "esc": world.every_steps(rates.esc_hz),
+            "truth": world.every_steps(rates.truth_hz),
         }
         self._steps = 0
 
@@ -133,8 +136,12 @@ class HilEncoder:
         k = self._every[name]
         return k > 0 and self._steps % k == 0
 
-    def encode(self, state: VehicleState, time_us: int) -> bytes:
-        """All messages of one control step at `time_us`, as one buffer for one send."""
+    def encode(self, state: VehicleState, time_us: int, truth: EffectForces | None = None) -> bytes:
+        """All messages of one control step at `time_us`, as one buffer for one send.
+
+        `truth`, the simulator's true effect forces, travels as DEBUG_VECT "GE_TRUE" (the
+        world-frame ground-effect force, N): for evaluation and recordings, never control.
+        """
         self._history.append(state)
         hist = self._history
         imu = hist[max(0, len(hist) - 1 - self._imu_delay)]
@@ -149,6 +156,9 @@ class HilEncoder:
             parts.append(self._esc(state))
         if self._due("gps"):
             parts.append(self._gps(nav, time_us))
+        if truth is not None and self._due("truth"):
+            ge = truth.ground_effect_n
+            parts.append(self._pack_debug.pack(TRUTH_NAME, time_us, ge[0], ge[1], ge[2]))
         # HIL_SENSOR last: it is the tick a lockstep autopilot answers, so everything of this
         # step has arrived when it does.
         parts.append(self._hil_sensor(imu, time_us))

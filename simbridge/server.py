@@ -138,7 +138,7 @@ class SimServer:
                         lag = wall0 + sim.time_s / options.speedup - time.perf_counter()
                         if lag > 0.0:
                             time.sleep(lag)
-                    self._send(conn, encoder.encode(sim.state(), sim.time_us))
+                    self._send(conn, encoder.encode(sim.state(), sim.time_us, sim.effect_forces()))
             finally:
                 self.wall_s = time.perf_counter() - wall0
 

@@ -19,6 +19,17 @@ _CRC = struct.Struct("<H")
 MAVLINK2_STX = 0xFD
 
 
+def _array_layout(message_class: Any) -> tuple[tuple[str, int], ...]:
+    """(field, array length or 0) in wire order; a char array is one bytes value."""
+    types = dict(zip(message_class.fieldnames, message_class.fieldtypes, strict=True))
+    return tuple(
+        (name, 0 if types[name] == "char" else length)
+        for name, length in zip(
+            message_class.ordered_fieldnames, message_class.array_lengths, strict=True
+        )
+    )
+
+
 class PacketSequence:
     """The packet sequence number of one outgoing stream."""
 
@@ -41,10 +52,7 @@ class WirePacker:
     ) -> None:
         names = message_class.fieldnames
         self._order = tuple(
-            (names.index(name), length)
-            for name, length in zip(
-                message_class.ordered_fieldnames, message_class.array_lengths, strict=True
-            )
+            (names.index(name), length) for name, length in _array_layout(message_class)
         )
         self._struct = message_class.unpacker
         self._crc_extra = bytes([message_class.crc_extra])
@@ -83,9 +91,9 @@ class WireUnpacker:
     def __init__(self, message_class: Any) -> None:
         self._struct = message_class.unpacker
         self._size = message_class.unpacker.size
-        self._layout = tuple(
-            zip(message_class.ordered_fieldnames, message_class.array_lengths, strict=True)
-        )
+        self._layout = _array_layout(message_class)
+        types = dict(zip(message_class.fieldnames, message_class.fieldtypes, strict=True))
+        self._text = tuple(name for name, kind in types.items() if kind == "char")
 
     def decode_payload(self, payload: bytes) -> dict[str, Any] | None:
         """The fields of one payload (MAVLink 2 may have dropped its trailing zeros)."""
@@ -104,6 +112,8 @@ class WireUnpacker:
             else:
                 fields[name] = values[i]
                 i += 1
+        for name in self._text:  # as pymavlink: text up to the first NUL
+            fields[name] = fields[name].split(b"\0", 1)[0].decode("utf-8", "replace")
         return fields
 
 

@@ -123,6 +123,13 @@ class SensorRates:
         50.0, unit="Hz", lo=0.0, hi=1000.0, doc="DISTANCE_SENSOR (a VL53L1x ranges at 50 Hz)"
     )
     esc_hz: float = param(125.0, unit="Hz", lo=0.0, hi=1000.0, doc="ESC_TELEMETRY_1_TO_4")
+    truth_hz: float = param(
+        250.0,
+        unit="Hz",
+        lo=0.0,
+        hi=1000.0,
+        doc="DEBUG_VECT GE_TRUE, the true ground-effect force, for evaluation only",
+    )
 
 
 @dataclass(frozen=True)
