@@ -76,8 +76,29 @@ class AnalyticGroundEffect:
         return (0.0, 0.0, total)
 
 
+class NeuralGroundEffect:
+    """A trained network (the learner's model file) on the 12 features."""
+
+    name = "neural"
+
+    def __init__(self, net: object) -> None:
+        self.net = net  # learner.model.GroundEffectNet; swapped whole by the online learner
+
+    def predict(self, inputs: GroundEffectInputs) -> Vec3:
+        v, q, n = inputs.velocity_m_s, inputs.quaternion, inputs.rotor_speeds_rad_s
+        f = self.net.predict(
+            (inputs.height_m, v[0], v[1], v[2], q[0], q[1], q[2], q[3], n[0], n[1], n[2], n[3])
+        )
+        return (float(f[0]), float(f[1]), float(f[2]))
+
+
+def default_network(rho: float) -> str:
+    """The packaged network trained at the rho closest to `rho` (rho1 or rho2)."""
+    return "rho1" if abs(rho - 1.0) <= abs(rho - 2.0) else "rho2"
+
+
 def make_model(
-    name: str, vehicle: Vehicle, rho: float = 1.0, network: Path | None = None
+    name: str, vehicle: Vehicle, rho: float = 1.0, network: str | Path | None = None
 ) -> GroundEffectModel:
     """The model called `name`; bad choices stop with a message naming the option."""
     if name == "none":
@@ -87,7 +108,9 @@ def make_model(
             raise ConfigError(f"--rho: {rho:g} is outside the allowed range (0, 50]")
         return AnalyticGroundEffect(vehicle, rho)
     if name == "neural":
-        raise ConfigError(
-            "--model neural: no network format exists yet; the learner (issue 5) brings it"
+        from learner.model import load_model
+
+        return NeuralGroundEffect(
+            load_model(network if network is not None else default_network(rho))
         )
     raise ConfigError(f"--model: unknown model {name!r}; choose one of {', '.join(MODEL_NAMES)}")

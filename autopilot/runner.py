@@ -26,8 +26,11 @@ from simbridge.frames import (
     ned_to_enu,
     quat_ned_frd_to_enu_flu,
     quat_to_matrix,
+    rotate,
 )
-from simbridge.vehicle import Vehicle
+from simbridge.hil import RAD_S_TO_RPM
+from simbridge.rotors import Quad
+from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
 MODES = [m.value for m in Mode]
 
@@ -44,6 +47,9 @@ class AutopilotConfig:
     link_timeout_s: float = 1.0
     settle_after_landing_s: float = 0.5  # keep logging after disarm, to see any bounce
     max_flight_s: float = 900.0
+    record_hz: float = 0.0  # > 0: record learning samples at this rate (thesis: 100 Hz)
+    stop_after_samples: int | None = None  # end the flight once this many are recorded
+    on_sample: Callable[[int], None] | None = None  # told the count of recorded samples
 
 
 @dataclass
@@ -52,6 +58,7 @@ class Flight:
     summary: dict[str, Any]
     ended: str  # "landed", "mission time limit", or the lost link's reason
     controller_us: list[float] = field(default_factory=list)
+    samples: np.ndarray | None = None  # learning samples, columns learner.dataset.COLUMNS
 
 
 def flight_state(step: Step, origin: tuple[float, float, float]) -> FlightState:
@@ -94,6 +101,41 @@ def estimate_height(
     return previous + state.velocity_m_s[2] * dt_s
 
 
+RECORDED_MODES = (Mode.TAKING_OFF, Mode.FLYING, Mode.HOLDING, Mode.LANDING)
+# Samples are taken in the air only: on the ground the contact force would pass for ground
+# effect in equation 3.16.
+AIRBORNE_MARGIN_M = 0.002
+
+
+def learning_sample(
+    t: float, step: Step, state: FlightState, height: float, applied_rad_s: Quad, vehicle: Vehicle
+) -> tuple[float, ...]:
+    """One row of a learning dataset (learner.dataset.COLUMNS), from this step's messages.
+
+    The accelerometer's specific force is the mean over the control period that just ended,
+    under the rotor speeds sent for it (`applied_rad_s`); equation 3.16 then gives the force
+    nothing else explains: f_ge = m a - m g - R f_rotors (g pointing down).
+    """
+    m = quat_to_matrix(state.quaternion)
+    sensor = step.sensor
+    f_body = frd_to_flu((sensor["xacc"], sensor["yacc"], sensor["zacc"]))
+    a = rotate(m, f_body)
+    a = (a[0], a[1], a[2] - GRAVITY_M_S2)
+    thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in applied_rad_s)
+    mass = vehicle.mass_kg
+    target = (
+        mass * a[0] - m[2] * thrust,
+        mass * a[1] - m[5] * thrust,
+        mass * a[2] + mass * GRAVITY_M_S2 - m[8] * thrust,
+    )
+    esc = step.latest.get("ESC_TELEMETRY_1_TO_4")
+    actual = tuple(r / RAD_S_TO_RPM for r in esc["rpm"]) if esc else (math.nan,) * 4
+    truth = step.latest.get("DEBUG_VECT")
+    true_ge = (truth["x"], truth["y"], truth["z"]) if truth else (math.nan,) * 3
+    v, q = state.velocity_m_s, state.quaternion
+    return (t, height, *v, *q, *applied_rad_s, *a, *actual, *target, *true_ge)
+
+
 def fixed_point_step(previous: Vec3, target: Vec3, rotor_thrust_n: float) -> Vec3:
     """The next ground-effect estimate, from the model's value at the last rotor speeds.
 
@@ -125,6 +167,8 @@ def fly_mission(config: AutopilotConfig, say: Callable[[str], None] = print) -> 
     last_t = 0.0
     cmd_state: CommanderState | None = None
     ended = "landed"
+    samples: list[tuple[float, ...]] = []
+    next_sample_s = 0.0
     link = SimLink(config.sim_url, timeout_s=config.link_timeout_s)
     wall0 = time.perf_counter()
     try:
@@ -147,6 +191,24 @@ def fly_mission(config: AutopilotConfig, say: Callable[[str], None] = print) -> 
                 resting_height,
             )
             cmd_state = cmd.state
+            airborne = height > resting_height + AIRBORNE_MARGIN_M
+            if (
+                config.record_hz > 0.0
+                and t >= next_sample_s
+                and airborne
+                and cmd_state.mode in RECORDED_MODES
+            ):
+                samples.append(learning_sample(t, step, state, height, speeds, vehicle))
+                period = 1.0 / config.record_hz  # on a 100 Hz schedule, 250 Hz steps
+                next_sample_s = next_sample_s + period if t - next_sample_s < period else t + period
+                if config.on_sample is not None:
+                    config.on_sample(len(samples))
+                if (
+                    config.stop_after_samples is not None
+                    and len(samples) >= config.stop_after_samples
+                ):
+                    ended = "enough samples"
+                    break
             if cmd.setpoint is not None:
                 t0 = time.perf_counter()
                 target = config.model.predict(
@@ -199,4 +261,5 @@ def fly_mission(config: AutopilotConfig, say: Callable[[str], None] = print) -> 
             controller_us_p99=float(np.percentile(us, 99)),
         )
     summary.update(model=config.model.name, malformed=link.malformed, unknown=link.unknown)
-    return Flight(log=log, summary=summary, ended=ended)
+    data = np.asarray(samples, dtype=float) if samples else None
+    return Flight(log=log, summary=summary, ended=ended, samples=data)

@@ -29,6 +29,7 @@ def fly(
     speedup: str = "max",
     start: str | None = None,
     trajectory: Path | None = None,
+    network: str | Path | None = None,
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line."""
     world_obj = load_world(world)  # refuse a bad world or mission before starting anything
@@ -56,6 +57,8 @@ def fly(
     ]
     if trajectory is not None:
         cmd += ["--trajectory", str(trajectory)]
+    if network is not None:
+        cmd += ["--network", str(network)]
     try:
         autopilot = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
     finally:

@@ -34,7 +34,7 @@ def start_sim(
         speedup,
     ]
     if start is not None:
-        cmd += ["--start", start]
+        cmd.append(f"--start={start}")  # a leading minus would read as an option
     cmd += extra or []
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None

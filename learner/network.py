@@ -1,0 +1,91 @@
+"""The ground-effect network of thesis section 3.5.3 with a Lipschitz bound (equation 2.33).
+
+12 -> 25 -> 30 -> 15 -> 3, ReLU. Spectral normalisation as Neural Lander applies it: after
+every optimiser step each weight matrix whose spectral norm exceeds the per-layer bound
+(default 2) is scaled back onto it, so the network's Lipschitz constant (in standardised
+units) is at most the product of the bounds.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import torch
+
+LAYERS = (12, 25, 30, 15, 3)
+DEFAULT_LAYER_BOUND = 2.0
+
+
+def build_network(layers: tuple[int, ...] = LAYERS, seed: int = 0) -> torch.nn.Sequential:
+    torch.manual_seed(seed)
+    modules: list[torch.nn.Module] = []
+    for i, (n_in, n_out) in enumerate(itertools.pairwise(layers)):
+        modules.append(torch.nn.Linear(n_in, n_out))
+        if i < len(layers) - 2:
+            modules.append(torch.nn.ReLU())
+    return torch.nn.Sequential(*modules)
+
+
+def linear_layers(net: torch.nn.Sequential) -> list[torch.nn.Linear]:
+    return [m for m in net if isinstance(m, torch.nn.Linear)]
+
+
+@torch.no_grad()
+def project_lipschitz(net: torch.nn.Sequential, layer_bound: float) -> None:
+    """Scale every weight matrix back to spectral norm <= layer_bound (exact, by SVD)."""
+    for layer in linear_layers(net):
+        sigma = torch.linalg.matrix_norm(layer.weight, ord=2)
+        if sigma > layer_bound:
+            layer.weight.mul_(layer_bound / sigma)
+
+
+class LipschitzProjector:
+    """The projection after every optimiser step, with one power iteration per layer and
+    step (as torch's spectral_norm estimates sigma): the weights move little between steps,
+    so the persistent vectors track the top singular pair. A small margin covers what the
+    estimate may miss; `finish` projects exactly once at the end."""
+
+    def __init__(self, net: torch.nn.Sequential, layer_bound: float, seed: int = 0) -> None:
+        self.layers = linear_layers(net)
+        self.bound = layer_bound
+        g = torch.Generator().manual_seed(seed)
+        self.u = [torch.randn(layer.weight.shape[0], generator=g) for layer in self.layers]
+        project_lipschitz(net, layer_bound)
+        for _ in range(20):
+            self.step()
+
+    @torch.no_grad()
+    def step(self) -> None:
+        for k, layer in enumerate(self.layers):
+            w = layer.weight
+            v = torch.nn.functional.normalize(w.t() @ self.u[k], dim=0)
+            u = torch.nn.functional.normalize(w @ v, dim=0)
+            self.u[k] = u
+            sigma = torch.dot(u, w @ v)
+            if sigma > self.bound * 0.999:
+                w.mul_(self.bound * 0.999 / sigma)
+
+    def finish(self, net: torch.nn.Sequential) -> None:
+        project_lipschitz(net, self.bound)
+
+
+def spectral_norms(weights: list[np.ndarray]) -> list[float]:
+    return [float(np.linalg.norm(w, ord=2)) for w in weights]
+
+
+def export_weights(net: torch.nn.Sequential) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    layers = linear_layers(net)
+    return (
+        [layer.weight.detach().numpy().astype(np.float64).copy() for layer in layers],
+        [layer.bias.detach().numpy().astype(np.float64).copy() for layer in layers],
+    )
+
+
+@torch.no_grad()
+def import_weights(
+    net: torch.nn.Sequential, weights: list[np.ndarray], biases: list[np.ndarray]
+) -> None:
+    for layer, w, b in zip(linear_layers(net), weights, biases, strict=True):
+        layer.weight.copy_(torch.as_tensor(w, dtype=layer.weight.dtype))
+        layer.bias.copy_(torch.as_tensor(b, dtype=layer.bias.dtype))
