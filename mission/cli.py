@@ -215,6 +215,14 @@ def cmd_learn(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
+    if args.target == "model":
+        from learner.bench import bench_model
+
+        result = bench_model(args.network)
+        print(
+            json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
+        )
+        return 0
     if args.target == "sitl":
         from mission.bench import bench_sitl
 
@@ -343,6 +351,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", type=Path, help="also write the JSON to this file")
     b.set_defaults(func=cmd_bench)
 
+    b = bench_sub.add_parser("model", help="the ground-effect network's inference time")
+    b.add_argument("--network", default="rho2", help="model file or packaged name")
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(func=cmd_bench)
     b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")
     b.add_argument("--world", default="default")
     b.add_argument("--json", action="store_true", help="print one JSON object")

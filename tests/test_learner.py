@@ -125,3 +125,16 @@ def test_neural_closes_the_gap_between_none_and_analytic_in_closed_loop():
     assert result["gap_closed"] >= 0.9, {k: v.mean() for k, v in errors.items()}
     assert result["welch_p"] < 0.01
     assert errors["neural"].mean() < errors["none"].mean()
+
+
+def test_prediction_plot_and_inference_benchmark(tmp_path):
+    out = tmp_path / "pred.png"
+    result = run_groundfx(
+        "learn", "plot", "--network", "rho2", "--rho-list", "1,2", "--out", str(out)
+    )
+    assert result.returncode == 0, result.stderr
+    assert out.read_bytes()[:4] == b"\x89PNG" and out.stat().st_size > 20000
+    bench = run_groundfx("bench", "model", "--json")
+    assert bench.returncode == 0, bench.stderr
+    figures = json.loads(bench.stdout.strip().splitlines()[-1])
+    assert 0 < figures["predict_us_p50"] <= figures["predict_us_p99"]
