@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -56,8 +56,7 @@ class AutopilotConfig:
 class Flight:
     log: np.ndarray
     summary: dict[str, Any]
-    ended: str  # "landed", "mission time limit", or the lost link's reason
-    controller_us: list[float] = field(default_factory=list)
+    ended: str  # "landed", "enough samples", "mission time limit", or the lost link's reason
     samples: np.ndarray | None = None  # learning samples, columns learner.dataset.COLUMNS
 
 
@@ -154,7 +153,8 @@ def fixed_point_step(previous: Vec3, target: Vec3, rotor_thrust_n: float) -> Vec
     )
 
 
-def fly_mission(config: AutopilotConfig, say: Callable[[str], None] = print) -> Flight:
+def fly_mission(config: AutopilotConfig) -> Flight:
+    """Fly the mission against the simulator at `config.sim_url`; the flight's log and figures."""
     vehicle = config.vehicle
     resting_height = vehicle.body_size_m[2] / 2.0  # the range sensor sits at the centre of mass
     channels = vehicle.actuator_channels

@@ -427,7 +427,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--out", type=Path, default=DEFAULT_LOGS / "ground_effect.png")
     g.set_defaults(func=cmd_plot)
 
-    p = sub.add_parser("demo", help="the demo flight (analytic model against none)")
+    p = sub.add_parser("demo", help="the demo flight (analytic, neural and no model)")
     p.add_argument("--world", help="world YAML or packaged name (default: rho2; --lift: default)")
     p.add_argument("--logs", type=Path, default=DEFAULT_LOGS)
     p.add_argument(

@@ -1,4 +1,4 @@
-"""`groundfx demo`: the demo flight, with and without the ground-effect model, side by side."""
+"""`groundfx demo`: the demo flight with the analytic, the learned and no ground-effect model."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ def run_flight_demo(world: str, logs: Path, say=print) -> bool:
         "hover 3 cm above the ground, land"
     )
     landed = True
-    for model in ("analytic", "none"):
+    for model in ("analytic", "neural", "none"):
         summary = fly(DEMO_MISSION, world=world, model=model)
         say(describe(summary))
         landed &= bool(summary["landed"])

@@ -23,7 +23,6 @@ class ClientView:
     """The latest messages of each kind the client has seen."""
 
     latest: dict[str, object] = field(default_factory=dict)
-    sensor_times_us: list[int] = field(default_factory=list)
 
 
 def connect(host: str, port: int, timeout_s: float = 10.0) -> socket.socket:
@@ -45,7 +44,6 @@ def run_lockstep(
     steps: int,
     policy: Policy,
     view: ClientView | None = None,
-    keep_times: bool = False,
 ) -> ClientView:
     """Answer `steps` HIL_SENSOR messages, then return (the caller closes the socket)."""
     view = view or ClientView()
@@ -62,8 +60,6 @@ def run_lockstep(
             view.latest[kind] = msg
             if kind != "HIL_SENSOR":
                 continue
-            if keep_times:
-                view.sensor_times_us.append(msg.time_usec)
             controls[0:4] = policy(msg.time_usec, view)
             sock.sendall(
                 mavlink.MAVLink_hil_actuator_controls_message(

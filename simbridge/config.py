@@ -143,14 +143,3 @@ def load_yaml(path: Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level")
     return data
-
-
-def describe(cls: type) -> list[tuple[str, str, str, str]]:
-    """(field, unit, range, meaning) for documentation and `--help` texts."""
-    rows = []
-    for f in dataclasses.fields(cls):
-        if f.init:
-            rows.append(
-                (f.name, f.metadata.get("unit", ""), range_text(f), f.metadata.get("doc", ""))
-            )
-    return rows

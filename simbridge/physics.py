@@ -374,15 +374,6 @@ class Simulation:
             wind_m_s=tuple(self._wind),
         )
 
-    def reset_pose(self, position_m: Vec3, quaternion: Quat) -> None:
-        """Put the vehicle at a pose, at rest (tests, benchmarks)."""
-        pb.resetBasePositionAndOrientation(
-            self._body, position_m, wxyz_to_xyzw(quaternion), physicsClientId=self._cid
-        )
-        pb.resetBaseVelocity(
-            self._body, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=self._cid
-        )
-
     def close(self) -> None:
         if self._cid >= 0:
             pb.disconnect(physicsClientId=self._cid)
