@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from learner.npzfile import read_npz
 from simbridge.config import ConfigError
 
 FORMAT = "groundfx-dataset"
@@ -77,26 +78,12 @@ def save_dataset(path: Path, rows: np.ndarray, meta: dict[str, Any]) -> Path:
 
 def load_dataset(path: Path) -> Dataset:
     """A dataset file; anything else stops with a message naming the file."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            header = json.loads(str(data["header"]))
-            if header.get("format") != FORMAT:
-                raise ConfigError(f"{path}: not a groundfx dataset")
-            if header.get("version") != VERSION:
-                raise ConfigError(
-                    f"{path}: dataset version {header.get('version')}, "
-                    f"this groundfx reads version {VERSION}"
-                )
-            missing = [c for c in COLUMNS if c not in data.files]
-            if missing:
-                raise ConfigError(f"{path}: missing columns {', '.join(missing)}")
-            columns = {c: np.asarray(data[c], dtype=float) for c in COLUMNS}
-    except ConfigError:
-        raise
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
-    except Exception as err:  # zip, JSON or array errors: a damaged or foreign file
-        raise ConfigError(
-            f"{path}: not a readable groundfx dataset ({type(err).__name__})"
-        ) from None
-    return Dataset(columns, {k: v for k, v in header.items() if k not in ("columns",)})
+
+    def read(header: dict[str, Any], data: Any) -> Dataset:
+        missing = [c for c in COLUMNS if c not in data.files]
+        if missing:
+            raise ConfigError(f"{path}: missing columns {', '.join(missing)}")
+        columns = {c: np.asarray(data[c], dtype=float) for c in COLUMNS}
+        return Dataset(columns, {k: v for k, v in header.items() if k != "columns"})
+
+    return read_npz(path, FORMAT, VERSION, "dataset", read)

@@ -18,7 +18,8 @@ import numpy as np
 
 from learner.dataset import FEATURES, TARGETS
 from learner.network import LAYERS
-from simbridge.config import ConfigError
+from learner.npzfile import read_npz
+from simbridge.config import ConfigError, resolve_packaged
 
 FORMAT = "groundfx-ground-effect-model"
 VERSION = 1
@@ -114,49 +115,28 @@ def save_model(path: Path, net: GroundEffectNet) -> Path:
 
 
 def resolve_model_path(name_or_path: str | Path) -> Path:
-    """A packaged model name (`rho1`, `rho2`) or a path to a model file."""
-    path = Path(name_or_path)
-    if path.suffix == ".npz" or path.exists():
-        return path
-    packaged = PACKAGED_DIR / f"{name_or_path}.npz"
-    if not packaged.exists():
-        known = ", ".join(sorted(p.stem for p in PACKAGED_DIR.glob("*.npz")))
-        raise ConfigError(f"network {name_or_path!r}: no such file or packaged model ({known})")
-    return packaged
+    """A packaged network name (`rho1`, `rho2`) or a path to a model file."""
+    return resolve_packaged(name_or_path, PACKAGED_DIR, ".npz", "network")
 
 
 def load_model(name_or_path: str | Path) -> GroundEffectNet:
     """A model file; a wrong, damaged or foreign file stops with a message naming it."""
     path = resolve_model_path(name_or_path)
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            header = json.loads(str(data["header"]))
-            if header.get("format") != FORMAT:
-                raise ConfigError(f"{path}: not a groundfx ground-effect model")
-            if header.get("version") != VERSION:
-                raise ConfigError(
-                    f"{path}: model version {header.get('version')}, "
-                    f"this groundfx reads version {VERSION}"
-                )
-            if tuple(header.get("features", ())) != FEATURES:
-                raise ConfigError(
-                    f"{path}: features {header.get('features')} differ from {list(FEATURES)}"
-                )
-            layers = tuple(header.get("layers", LAYERS))
-            weights = [np.asarray(data[f"w{i}"], dtype=np.float64) for i in range(len(layers) - 1)]
-            biases = [np.asarray(data[f"b{i}"], dtype=np.float64) for i in range(len(layers) - 1)]
-            normaliser = Normaliser(
-                *(
-                    np.asarray(data[k], dtype=np.float64)
-                    for k in ("x_mean", "x_std", "y_mean", "y_std")
-                )
+
+    def read(header: dict[str, Any], data: Any) -> tuple[Any, ...]:
+        if tuple(header.get("features", ())) != FEATURES:
+            raise ConfigError(
+                f"{path}: features {header.get('features')} differ from {list(FEATURES)}"
             )
-    except ConfigError:
-        raise
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
-    except Exception as err:  # zip, JSON, missing or malformed arrays: damaged or foreign
-        raise ConfigError(f"{path}: not a readable groundfx model ({type(err).__name__})") from None
+        layers = tuple(header.get("layers", LAYERS))
+        weights = [np.asarray(data[f"w{i}"], dtype=np.float64) for i in range(len(layers) - 1)]
+        biases = [np.asarray(data[f"b{i}"], dtype=np.float64) for i in range(len(layers) - 1)]
+        normaliser = Normaliser(
+            *(np.asarray(data[k], dtype=np.float64) for k in ("x_mean", "x_std", "y_mean", "y_std"))
+        )
+        return header, layers, weights, biases, normaliser
+
+    header, layers, weights, biases, normaliser = read_npz(path, FORMAT, VERSION, "model", read)
     for i, (w, b) in enumerate(zip(weights, biases, strict=True)):
         if w.shape != (layers[i + 1], layers[i]) or b.shape != (layers[i + 1],):
             raise ConfigError(

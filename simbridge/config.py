@@ -143,3 +143,15 @@ def load_yaml(path: Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level")
     return data
+
+
+def resolve_packaged(name_or_path: str | Path, directory: Path, suffix: str, kind: str) -> Path:
+    """A packaged file's name (`nano`, `rho2`, ...) in `directory`, or a path to a file."""
+    path = Path(name_or_path)
+    if path.suffix in (suffix, ".yml" if suffix == ".yaml" else suffix) or path.exists():
+        return path
+    packaged = directory / f"{name_or_path}{suffix}"
+    if not packaged.exists():
+        known = ", ".join(sorted(p.stem for p in directory.glob(f"*{suffix}")))
+        raise ConfigError(f"{kind} {name_or_path!r}: no such file or packaged {kind} ({known})")
+    return packaged

@@ -9,7 +9,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from simbridge.config import ConfigError, build, load_yaml, param
+from simbridge.config import build, load_yaml, param, resolve_packaged
 
 VEHICLES_DIR = Path(__file__).parent / "vehicles"
 GRAVITY_M_S2 = 9.81
@@ -86,14 +86,7 @@ class Vehicle:
 
 def resolve_vehicle_path(name_or_path: str | Path) -> Path:
     """A packaged vehicle name (`nano`) or a path to a vehicle YAML."""
-    path = Path(name_or_path)
-    if path.suffix in (".yaml", ".yml") or path.exists():
-        return path
-    packaged = VEHICLES_DIR / f"{name_or_path}.yaml"
-    if not packaged.exists():
-        known = ", ".join(sorted(p.stem for p in VEHICLES_DIR.glob("*.yaml")))
-        raise ConfigError(f"vehicle {name_or_path!r}: no such file or packaged vehicle ({known})")
-    return packaged
+    return resolve_packaged(name_or_path, VEHICLES_DIR, ".yaml", "vehicle")
 
 
 def load_vehicle(name_or_path: str | Path = "nano") -> Vehicle:

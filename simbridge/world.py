@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from simbridge.config import ConfigError, build, load_yaml, param
+from simbridge.config import ConfigError, build, load_yaml, param, resolve_packaged
 from simbridge.effects import EffectSet, parse_effects
 
 WORLDS_DIR = Path(__file__).parent / "worlds"
@@ -178,15 +178,8 @@ class World:
 
 
 def resolve_world_path(name_or_path: str | Path) -> Path:
-    """A packaged world name (`default`, `box`, ...) or a path to a world YAML."""
-    path = Path(name_or_path)
-    if path.suffix in (".yaml", ".yml") or path.exists():
-        return path
-    packaged = WORLDS_DIR / f"{name_or_path}.yaml"
-    if not packaged.exists():
-        known = ", ".join(sorted(p.stem for p in WORLDS_DIR.glob("*.yaml")))
-        raise ConfigError(f"world {name_or_path!r}: no such file or packaged world ({known})")
-    return packaged
+    """A packaged world name (`default`, `rho2`, ...) or a path to a world YAML."""
+    return resolve_packaged(name_or_path, WORLDS_DIR, ".yaml", "world")
 
 
 def _parse_obstacles(entries: Any, where: str) -> tuple[Box, ...]:

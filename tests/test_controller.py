@@ -108,7 +108,7 @@ def test_analytic_model_is_equation_3_4_per_rotor():
 
 
 def test_model_choice_errors_name_the_option():
-    with pytest.raises(ConfigError, match="network 'rho9': no such file or packaged model"):
+    with pytest.raises(ConfigError, match="network 'rho9': no such file or packaged network"):
         make_model("neural", V, network="rho9")
     assert make_model("neural", V, rho=2.0).net.header["training"]["rho"] == [2.0]
     with pytest.raises(ConfigError, match=r"--rho: -1 is outside the allowed range \(0, 50\]"):

@@ -109,7 +109,7 @@ def test_bad_model_files_are_refused(tmp_path):
     (tmp_path / "junk.npz").write_bytes(b"\x00" * 100)
     with pytest.raises(ConfigError, match="not a readable groundfx model"):
         load_model(tmp_path / "junk.npz")
-    with pytest.raises(ConfigError, match="no such file or packaged model"):
+    with pytest.raises(ConfigError, match="no such file or packaged network"):
         load_model("rho7")
     good = dict(np.load(load_model.__globals__["resolve_model_path"]("rho2")))
     good["w1"] = good["w1"][:, :3]
