@@ -21,6 +21,21 @@ def default_rho(world_name: str) -> float:
     return ge.rho if ge is not None else 1.0
 
 
+def autopilot_command(sim_port: int, mission_path: Path, *options: str) -> list[str]:
+    """The command line of an autopilot process flying `mission_path` against a local sim."""
+    return [
+        sys.executable,
+        "-m",
+        "mission.cli",
+        "autopilot",
+        "--sim",
+        f"tcp:127.0.0.1:{sim_port}",
+        "--mission",
+        str(mission_path),
+        *options,
+    ]
+
+
 def fly(
     mission_path: Path,
     world: str = "default",
@@ -38,15 +53,9 @@ def fly(
     origin = world_obj.origin
     wall0 = time.perf_counter()
     sim, port = start_sim(resolve_world_path(world), speedup=speedup, start=start)
-    cmd = [
-        sys.executable,
-        "-m",
-        "mission.cli",
-        "autopilot",
-        "--sim",
-        f"tcp:127.0.0.1:{port}",
-        "--mission",
-        str(mission_path),
+    cmd = autopilot_command(
+        port,
+        mission_path,
         "--model",
         model,
         "--rho",
@@ -54,7 +63,7 @@ def fly(
         "--origin",
         f"{origin.lat_deg},{origin.lon_deg},{origin.alt_m}",
         "--json",
-    ]
+    )
     if trajectory is not None:
         cmd += ["--trajectory", str(trajectory)]
     if network is not None:

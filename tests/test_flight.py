@@ -6,7 +6,6 @@ import json
 import signal
 import socket
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -14,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mission.fly import fly
+from mission.fly import autopilot_command, fly
 from simbridge.launch import finish, start_sim
 from tests.helpers import REPO, run_groundfx
 
@@ -23,17 +22,7 @@ EXAMPLES = REPO / "mission" / "examples"
 
 def autopilot(port: int, mission: str, *extra: str) -> subprocess.Popen[str]:
     return subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "mission.cli",
-            "autopilot",
-            "--sim",
-            f"tcp:127.0.0.1:{port}",
-            "--mission",
-            str(EXAMPLES / mission),
-            *extra,
-        ],
+        autopilot_command(port, EXAMPLES / mission, *extra),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
