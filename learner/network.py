@@ -87,5 +87,5 @@ def import_weights(
     net: torch.nn.Sequential, weights: list[np.ndarray], biases: list[np.ndarray]
 ) -> None:
     for layer, w, b in zip(linear_layers(net), weights, biases, strict=True):
-        layer.weight.copy_(torch.as_tensor(w, dtype=layer.weight.dtype))
-        layer.bias.copy_(torch.as_tensor(b, dtype=layer.bias.dtype))
+        layer.weight.copy_(torch.tensor(np.array(w), dtype=layer.weight.dtype))
+        layer.bias.copy_(torch.tensor(np.array(b), dtype=layer.bias.dtype))
