@@ -227,13 +227,15 @@ KINDS = {
 
 
 def plan_steps(
-    items: tuple[MissionItem, ...], home: Home, home_local_m: Vec3
+    items: tuple[MissionItem, ...], origin: Home, home_up_m: float
 ) -> tuple[PlanStep, ...]:
-    """The validated items as local steps; `home_local_m` is home in the local frame."""
+    """The validated items as local steps. `origin` is the local frame's geodetic origin (its
+    altitude that of z = 0); `home_up_m` the local z of home, which relative altitudes add to."""
     steps = []
     for seq, item in enumerate(items):
         kind = KINDS[item.command]
         yaw = None if math.isnan(item.param4) else item.param4
+        up = item.z - origin.alt_m if item.frame in MSL_FRAMES else home_up_m + item.z
         if kind == "speed":
             speed = item.param2 if item.param2 > 0.0 else None
             steps.append(PlanStep(seq, kind, speed_m_s=speed))
@@ -244,8 +246,10 @@ def plan_steps(
         positioned = kind == "waypoint" or (item.x, item.y) != (NO_POSITION, NO_POSITION)
         position = None
         if positioned:
-            e, n, u = local_offset(item, home)
-            position = (home_local_m[0] + e, home_local_m[1] + n, home_local_m[2] + u)
+            east, north = geodetic_to_local(
+                origin.lat_deg, origin.lon_deg, item.x * 1e-7, item.y * 1e-7
+            )
+            position = (east, north, up)
         if kind == "waypoint":
             steps.append(
                 PlanStep(
@@ -253,8 +257,7 @@ def plan_steps(
                 )
             )
         elif kind == "takeoff":
-            up = item.z - home.alt_m if item.frame in MSL_FRAMES else item.z
-            steps.append(PlanStep(seq, kind, position, altitude_m=up, yaw_deg=yaw))
+            steps.append(PlanStep(seq, kind, position, altitude_m=up - home_up_m, yaw_deg=yaw))
         else:
             steps.append(PlanStep(seq, kind, position, yaw_deg=yaw))
     return tuple(steps)
@@ -263,7 +266,7 @@ def plan_steps(
 def item_at(
     command: int,
     home: Home,
-    offset_m: Vec3 | None,
+    offset_m: Vec3 | None,  # east, north, up of `home`
     param1: float = 0.0,
     param2: float = 0.0,
     param4: float = math.nan,
