@@ -1,23 +1,30 @@
-"""The commander: arming, take-off, waypoints, landing, touchdown and disarm, as a pure function.
+"""The commander: flight modes, arming, missions, take-off, landing, as pure functions.
 
-DISARMED -> ARMED (sensors healthy for `arm_delay_s`) -> TAKING_OFF (to the take-off altitude
-above the start) -> FLYING / HOLDING (the navigator's waypoints) -> LANDING (a setpoint
-descending at `land_speed_m_s`) -> LANDED (touchdown held for `touchdown_s`: rotors off).
+Two things describe the vehicle. The flight mode is what a ground station chose (hold,
+mission, takeoff, land, return, offboard; `autopilot.modes`). The phase is what the vehicle
+is doing: DISARMED -> ARMED (idling on the ground) -> TAKING_OFF -> FLYING / HOLDING ->
+LANDING -> LANDED (touchdown held for `touchdown_s`: rotors off, disarmed). Requests from a
+ground station (`requests.py`) change the state; `command` steps it once per control step.
+
+Setpoints lead the vehicle towards their target by at most what the mission speeds allow
+(`limited_setpoint`), so DO_CHANGE_SPEED and MPC_XY_CRUISE mean what they say.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from enum import StrEnum
 
 from autopilot.controller import Setpoint
-from autopilot.navigator import NavigatorState, Waypoint, navigate
+from autopilot.mission_items import PlanStep
+from autopilot.modes import FlightMode
 from simbridge.config import param
 from simbridge.frames import Vec3
 
 
-class Mode(StrEnum):
+class Phase(StrEnum):
     DISARMED = "disarmed"
     ARMED = "armed"
     TAKING_OFF = "taking_off"
@@ -27,18 +34,35 @@ class Mode(StrEnum):
     LANDED = "landed"
 
 
+AIRBORNE_PHASES = (Phase.TAKING_OFF, Phase.FLYING, Phase.HOLDING, Phase.LANDING)
+
+
 @dataclass(frozen=True)
 class CommanderParams:
-    arm_delay_s: float = param(0.1, unit="s", lo=0.0, hi=60.0, doc="healthy sensors before arming")
     spin_up_s: float = param(
         0.2, unit="s", lo=0.0, hi=10.0, doc="armed on the ground before take-off"
     )
-    takeoff_altitude_m: float = param(1.0, unit="m", lo=0.05, hi=100.0, doc="above the start")
+    takeoff_altitude_m: float = param(1.0, unit="m", lo=0.05, hi=100.0, doc="above home")
     takeoff_acceptance_m: float = param(
         0.05, unit="m", lo=0.001, hi=10.0, doc="take-off reached within"
     )
+    acceptance_radius_m: float = param(
+        0.05, unit="m", lo=0.001, hi=100.0, doc="waypoint reached within (item's 0)"
+    )
+    waypoint_timeout_s: float = param(
+        0.0, unit="s", lo=0.0, hi=3600.0, doc="not reached this long after the setpoint got "
+        "there: held anyway (0: wait forever)",
+    )  # fmt: skip
+    cruise_speed_m_s: float = param(0.5, unit="m/s", lo=0.01, hi=20.0, doc="horizontal speed")
+    climb_speed_m_s: float = param(0.5, unit="m/s", lo=0.01, hi=10.0, doc="vertical speed up")
+    descent_speed_m_s: float = param(
+        0.5, unit="m/s", lo=0.01, hi=10.0, doc="vertical speed down (not landing)"
+    )
     land_speed_m_s: float = param(
         0.1, unit="m/s", lo=0.01, hi=3.0, doc="descent rate of the landing setpoint"
+    )
+    return_altitude_m: float = param(
+        1.0, unit="m", lo=0.0, hi=100.0, doc="lowest altitude above home to return at"
     )
     touchdown_margin_m: float = param(
         0.004, unit="m", lo=0.0, hi=0.1, doc="height above resting that counts as down"
@@ -46,80 +70,310 @@ class CommanderParams:
     touchdown_s: float = param(
         0.1, unit="s", lo=0.0, hi=5.0, doc="down this long: touchdown, disarm"
     )
-
-
-@dataclass(frozen=True)
-class Mission:
-    waypoints: tuple[Waypoint, ...]
-    land: bool = True
+    offboard_timeout_s: float = param(
+        0.5, unit="s", lo=0.05, hi=60.0, doc="offboard setpoints older than this: hold"
+    )
 
 
 @dataclass(frozen=True)
 class CommanderState:
-    mode: Mode = Mode.DISARMED
-    since_s: float = 0.0  # when the mode began
-    nav: NavigatorState = NavigatorState()
-    origin_m: Vec3 | None = None  # where the vehicle stood when it armed
-    landing_from_m: Vec3 | None = None  # where the landing began
-    down_since_s: float | None = None  # touchdown condition first met
-    touchdown_s: float | None = None  # when it disarmed
+    phase: Phase = Phase.DISARMED
+    since_s: float = 0.0  # when the phase began
+    mode: FlightMode = FlightMode.HOLD
+    plan: tuple[PlanStep, ...] = ()
+    current: int = 0  # index into plan of the item being flown
+    mission_done: bool = False
+    home_m: Vec3 | None = None  # where the vehicle stood when it armed
+    speed_m_s: float | None = None  # a DO_CHANGE_SPEED in force (None: cruise speed)
+    target_m: Vec3 | None = None  # where the setpoint is going
+    yaw_deg: float = 0.0  # heading setpoint, from east counter-clockwise
+    carrot_m: Vec3 | None = None  # the last setpoint position, on the way to target_m
+    arrived_s: float | None = None  # when the setpoint reached the target
+    reached_s: float | None = None  # when the vehicle reached the target
+    landing_from_m: Vec3 | None = None
+    down_since_s: float | None = None
+    touchdown_s: float | None = None
+    takeoff_altitude_m: float | None = None  # a take-off command's own altitude
+    offboard: Setpoint | None = None
+    offboard_s: float = -math.inf  # when the last offboard setpoint came
 
 
 @dataclass(frozen=True)
 class Command:
     state: CommanderState
-    setpoint: Setpoint | None  # None: rotors off
+    setpoint: Setpoint | None  # None: rotors off (or idling on the ground)
     armed: bool
+    reached: tuple[int, ...] = ()  # mission items (plan indices) reached in this step
+    events: tuple[str, ...] = ()  # what changed, for the ground station and the log
 
 
-def _to(state: CommanderState, mode: Mode, time_s: float, **changes: object) -> CommanderState:
-    return dataclasses.replace(state, mode=mode, since_s=time_s, **changes)
+def phase_to(
+    state: CommanderState, phase: Phase, time_s: float, **changes: object
+) -> CommanderState:
+    return dataclasses.replace(state, phase=phase, since_s=time_s, **changes)
+
+
+def go_to(
+    state: CommanderState, target: Vec3, position: Vec3, yaw_deg: float | None = None
+) -> CommanderState:
+    """Head for `target`, the setpoint starting from where it is (or from the vehicle)."""
+    return dataclasses.replace(
+        state,
+        target_m=target,
+        carrot_m=state.carrot_m if state.carrot_m is not None else position,
+        arrived_s=None,
+        reached_s=None,
+        yaw_deg=state.yaw_deg if yaw_deg is None else yaw_deg,
+    )
+
+
+def limited_setpoint(
+    position: Vec3,
+    target: Vec3,
+    lead_s: float,
+    horizontal_m_s: float,
+    up_m_s: float,
+    down_m_s: float,
+) -> Vec3:
+    """The target, pulled to within `lead_s` times the speed limits of the vehicle.
+
+    The position loop's steady speed for an error e is e a0 / a1 (equation 3.7 with zero
+    desired velocity), so an error clipped to speed * a1 / a0 (`lead_s`) cruises at that
+    speed; moves shorter than the clip are the thesis's plain step, with no overshoot. A
+    setpoint ramping at the speed instead would overshoot by about speed / a0 when it stops:
+    near the ground, into the ground.
+    """
+    dx, dy, dz = (target[0] - position[0], target[1] - position[1], target[2] - position[2])
+    horizontal = math.hypot(dx, dy)
+    reach = horizontal_m_s * lead_s
+    if horizontal > reach:
+        dx, dy = dx * reach / horizontal, dy * reach / horizontal
+    dz = min(dz, up_m_s * lead_s) if dz > 0.0 else max(dz, -down_m_s * lead_s)
+    return (position[0] + dx, position[1] + dy, position[2] + dz)
+
+
+def _climb_first(state: CommanderState) -> bool:
+    """A mission starting on the ground with no take-off item climbs to the take-off altitude
+    first, as PX4 does."""
+    return (
+        state.mode == FlightMode.MISSION
+        and state.phase == Phase.TAKING_OFF
+        and not state.mission_done
+        and state.plan[state.current].kind != "takeoff"
+    )
+
+
+def start_landing(state: CommanderState, time_s: float, position: Vec3) -> CommanderState:
+    return phase_to(
+        state, Phase.LANDING, time_s, landing_from_m=position, down_since_s=None, target_m=None
+    )
+
+
+def _next_item(state: CommanderState, time_s: float, position: Vec3) -> CommanderState:
+    """Move on to the next mission item; past the last one the mission is done: hold."""
+    if state.current + 1 >= len(state.plan):
+        return dataclasses.replace(
+            state, mission_done=True, mode=FlightMode.HOLD, target_m=state.target_m or position
+        )
+    return dataclasses.replace(state, current=state.current + 1, target_m=None, reached_s=None)
+
+
+def _mission_target(
+    state: CommanderState, params: CommanderParams, step: PlanStep, position: Vec3
+) -> CommanderState:
+    """Aim the setpoint at the mission item `step` (once, when it becomes current)."""
+    home = state.home_m or position
+    if step.kind == "takeoff":
+        xy = step.position_m[:2] if step.position_m is not None else position[:2]
+        altitude = step.altitude_m if step.altitude_m > 0.0 else params.takeoff_altitude_m
+        return go_to(state, (xy[0], xy[1], home[2] + altitude), position, step.yaw_deg)
+    if step.kind == "waypoint":
+        return go_to(state, step.position_m, position, step.yaw_deg)
+    if step.kind == "land":
+        xy = step.position_m[:2] if step.position_m is not None else position[:2]
+        return go_to(state, (xy[0], xy[1], position[2]), position, step.yaw_deg)
+    # return: home at the higher of here and the return altitude
+    z = max(position[2], home[2] + params.return_altitude_m)
+    return go_to(state, (home[0], home[1], z), position)
+
+
+def _fly_mission(
+    state: CommanderState, params: CommanderParams, time_s: float, position: Vec3
+) -> tuple[CommanderState, tuple[int, ...]]:
+    """Advance the mission; returns the state and the items reached in this step."""
+    reached: list[int] = []
+    for _ in range(len(state.plan) + 1):  # at most every item once per step
+        if state.mission_done:
+            break
+        step = state.plan[state.current]
+        if step.kind == "speed":
+            reached.append(state.current)
+            state = _next_item(
+                dataclasses.replace(state, speed_m_s=step.speed_m_s), time_s, position
+            )
+            continue
+        if state.target_m is None:
+            state = _mission_target(state, params, step, position)
+        if state.reached_s is None:
+            break
+        if step.kind in ("land", "return"):
+            state = start_landing(state, time_s, position)  # reached at touchdown
+            break
+        if time_s - state.reached_s < step.hold_s:
+            break
+        reached.append(state.current)
+        state = _next_item(state, time_s, position)
+    return state, tuple(reached)
+
+
+def _reached(
+    state: CommanderState, params: CommanderParams, time_s: float, position: Vec3
+) -> CommanderState:
+    """Mark the target reached when the vehicle is within the acceptance radius of it (or the
+    setpoint has been there longer than the waypoint timeout)."""
+    if state.target_m is None or state.reached_s is not None:
+        return state
+    if state.arrived_s is None and state.carrot_m == state.target_m:
+        state = dataclasses.replace(state, arrived_s=time_s)
+    radius = params.acceptance_radius_m
+    step = state.plan[state.current] if state.mode == FlightMode.MISSION and state.plan else None
+    if step is not None and step.acceptance_m > 0.0:
+        radius = step.acceptance_m
+    if (step is not None and step.kind == "takeoff") or state.phase == Phase.TAKING_OFF:
+        close = abs(position[2] - state.target_m[2]) <= params.takeoff_acceptance_m
+    else:
+        close = math.dist(position, state.target_m) <= radius
+    late = (
+        params.waypoint_timeout_s > 0.0
+        and state.arrived_s is not None
+        and time_s - state.arrived_s >= params.waypoint_timeout_s
+    )
+    if close or late:
+        return dataclasses.replace(state, reached_s=time_s)
+    return state
 
 
 def command(
     state: CommanderState,
-    mission: Mission,
     params: CommanderParams,
     time_s: float,
     position_m: Vec3,
     height_m: float,
     resting_height_m: float,
+    lead_s: float = 2.0,
 ) -> Command:
     """One commander step at `time_s` from the vehicle's position and height above the surface."""
-    mode = state.mode
-    if mode == Mode.DISARMED:
-        if time_s - state.since_s >= params.arm_delay_s:
-            return Command(_to(state, Mode.ARMED, time_s, origin_m=position_m), None, True)
+    phase = state.phase
+    if phase in (Phase.DISARMED, Phase.LANDED):
         return Command(state, None, False)
-    if mode == Mode.LANDED:
-        return Command(state, None, False)
-    origin = state.origin_m or position_m
-    if mode == Mode.ARMED:
-        if time_s - state.since_s >= params.spin_up_s:
-            state = _to(state, Mode.TAKING_OFF, time_s)
-        else:
+    events: list[str] = []
+    if phase == Phase.ARMED:
+        wants_air = state.mode in (FlightMode.TAKEOFF, FlightMode.MISSION, FlightMode.OFFBOARD)
+        if state.mode == FlightMode.MISSION and state.mission_done:
+            wants_air = False
+        if not wants_air or time_s - state.since_s < params.spin_up_s:
             return Command(state, None, True)
-    if state.mode == Mode.TAKING_OFF:
-        target = (origin[0], origin[1], origin[2] + params.takeoff_altitude_m)
-        if abs(position_m[2] - target[2]) > params.takeoff_acceptance_m:
-            return Command(state, Setpoint(target), True)
-        state = _to(state, Mode.FLYING, time_s)
-    if state.mode in (Mode.FLYING, Mode.HOLDING):
-        nav = navigate(state.nav, mission.waypoints, position_m, time_s)
-        if not nav.done or not mission.land:
-            mode = Mode.HOLDING if nav.holding else Mode.FLYING
-            if mode != state.mode:
-                state = _to(state, mode, time_s)
-            return Command(dataclasses.replace(state, nav=nav.state), nav.setpoint, True)
-        state = _to(state, Mode.LANDING, time_s, nav=nav.state, landing_from_m=position_m)
-    # LANDING: a setpoint sinking at the landing speed until the vehicle is down.
+        state = phase_to(state, Phase.TAKING_OFF, time_s, carrot_m=position_m, target_m=None)
+        if state.mode == FlightMode.TAKEOFF or _climb_first(state):
+            home = state.home_m or position_m
+            altitude = state.takeoff_altitude_m or params.takeoff_altitude_m
+            target = (position_m[0], position_m[1], home[2] + altitude)
+            state = go_to(state, target, position_m)
+        events.append("taking off")
+    reached: tuple[int, ...] = ()
+    if state.phase == Phase.LANDING:
+        return _land(state, params, time_s, position_m, height_m, resting_height_m, events)
+    if state.mode == FlightMode.OFFBOARD:
+        if time_s - state.offboard_s <= params.offboard_timeout_s and state.offboard is not None:
+            phase = Phase.FLYING if state.phase != Phase.TAKING_OFF or position_m[2] > (
+                (state.home_m or position_m)[2] + params.takeoff_acceptance_m
+            ) else Phase.TAKING_OFF  # fmt: skip
+            if phase != state.phase:
+                state = phase_to(state, phase, time_s)
+            return Command(
+                dataclasses.replace(state, carrot_m=state.offboard.position_m),
+                state.offboard,
+                True,
+                events=tuple(events),
+            )
+        state = dataclasses.replace(state, mode=FlightMode.HOLD, target_m=position_m, carrot_m=None)
+        state = go_to(state, position_m, position_m)
+        events.append("offboard setpoints stopped: holding")
+    if state.mode == FlightMode.MISSION and not _climb_first(state):
+        state, reached = _fly_mission(state, params, time_s, position_m)
+        if state.phase == Phase.LANDING:
+            return _land(state, params, time_s, position_m, height_m, resting_height_m, events)
+        if state.mission_done:
+            events.append("mission complete")
+    elif state.mode == FlightMode.LAND:
+        return _land(
+            start_landing(state, time_s, position_m),
+            params, time_s, position_m, height_m, resting_height_m, events,
+        )  # fmt: skip
+    elif state.mode == FlightMode.RETURN:
+        home = state.home_m or position_m
+        if state.target_m is None:
+            z = max(position_m[2], home[2] + params.return_altitude_m)
+            state = go_to(state, (home[0], home[1], z), position_m)
+        if state.reached_s is not None:
+            return _land(
+                start_landing(state, time_s, position_m),
+                params, time_s, position_m, height_m, resting_height_m, events,
+            )  # fmt: skip
+    elif state.target_m is None:  # HOLD or TAKEOFF without a target: hold here
+        state = go_to(state, position_m, position_m)
+    horizontal = state.speed_m_s or params.cruise_speed_m_s
+    carrot = limited_setpoint(
+        position_m,
+        state.target_m,
+        lead_s,
+        horizontal,
+        params.climb_speed_m_s,
+        params.descent_speed_m_s,
+    )
+    state = _reached(dataclasses.replace(state, carrot_m=carrot), params, time_s, position_m)
+    if state.phase == Phase.TAKING_OFF and state.reached_s is not None:
+        state = phase_to(state, Phase.FLYING, time_s)
+        if state.mode == FlightMode.TAKEOFF:
+            state = dataclasses.replace(state, mode=FlightMode.HOLD)
+            events.append("take-off complete: holding")
+        elif state.mode == FlightMode.MISSION and state.plan[state.current].kind != "takeoff":
+            state = dataclasses.replace(state, target_m=None, reached_s=None)  # on to item 1
+    if state.phase in (Phase.FLYING, Phase.HOLDING):
+        holding = state.reached_s is not None
+        phase = Phase.HOLDING if holding else Phase.FLYING
+        if phase != state.phase:
+            state = phase_to(state, phase, time_s)
+    setpoint = Setpoint(carrot, yaw_rad=math.radians(state.yaw_deg))
+    return Command(state, setpoint, True, reached, tuple(events))
+
+
+def _land(
+    state: CommanderState,
+    params: CommanderParams,
+    time_s: float,
+    position_m: Vec3,
+    height_m: float,
+    resting_height_m: float,
+    events: list[str],
+) -> Command:
+    """LANDING: a setpoint sinking at the landing speed until the vehicle is down."""
     start = state.landing_from_m or position_m
     sink = params.land_speed_m_s
     target = (start[0], start[1], start[2] - sink * (time_s - state.since_s))
-    setpoint = Setpoint(target, velocity_m_s=(0.0, 0.0, -sink))
+    setpoint = Setpoint(target, velocity_m_s=(0.0, 0.0, -sink), yaw_rad=math.radians(state.yaw_deg))
     if height_m <= resting_height_m + params.touchdown_margin_m:
         down_since = state.down_since_s if state.down_since_s is not None else time_s
         if time_s - down_since >= params.touchdown_s:
-            return Command(_to(state, Mode.LANDED, time_s, touchdown_s=time_s), None, False)
-        return Command(dataclasses.replace(state, down_since_s=down_since), setpoint, True)
-    return Command(dataclasses.replace(state, down_since_s=None), setpoint, True)
+            reached: tuple[int, ...] = ()
+            if state.mode == FlightMode.MISSION and state.plan and not state.mission_done:
+                reached = (state.current,)
+                state = dataclasses.replace(state, mission_done=True)
+            landed = phase_to(
+                state, Phase.LANDED, time_s, touchdown_s=time_s, target_m=None, carrot_m=None
+            )
+            return Command(landed, None, False, reached, (*events, "landed: disarmed"))
+        state = dataclasses.replace(state, down_since_s=down_since, carrot_m=target)
+        return Command(state, setpoint, True, events=tuple(events))
+    state = dataclasses.replace(state, down_since_s=None, carrot_m=target)
+    return Command(state, setpoint, True, events=tuple(events))

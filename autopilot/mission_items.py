@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from simbridge.config import param
 from simbridge.frames import Vec3, geodetic_to_local, local_to_geodetic
 from simbridge.hil import mavlink as mav
 
@@ -213,7 +214,7 @@ class PlanStep:
     altitude_m: float = 0.0  # takeoff: above home
     hold_s: float = 0.0
     acceptance_m: float = 0.0  # 0: the vehicle's default
-    yaw_deg: float | None = None
+    yaw_deg: float | None = None  # from east, counter-clockwise; None: keep the heading
     speed_m_s: float | None = None  # "speed": the new horizontal speed (None: unchanged)
 
 
@@ -234,7 +235,8 @@ def plan_steps(
     steps = []
     for seq, item in enumerate(items):
         kind = KINDS[item.command]
-        yaw = None if math.isnan(item.param4) else item.param4
+        # MAVLink yaw: degrees clockwise from north; ours: counter-clockwise from east
+        yaw = None if math.isnan(item.param4) else 90.0 - item.param4
         up = item.z - origin.alt_m if item.frame in MSL_FRAMES else home_up_m + item.z
         if kind == "speed":
             speed = item.param2 if item.param2 > 0.0 else None
@@ -292,3 +294,37 @@ def speed_item(speed_m_s: float) -> MissionItem:
     return MissionItem(
         DO_CHANGE_SPEED, frame=FRAME_MISSION, param1=1.0, param2=speed_m_s, param3=-1.0
     )
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """A waypoint in the local frame, as mission YAML files and the data gatherer give them."""
+
+    position_m: Vec3 = param(unit="m", lo=-1000.0, hi=1000.0, doc="local x east, y north, z up")
+    acceptance_radius_m: float = param(0.05, unit="m", lo=0.001, hi=100.0, doc="reached within")
+    hold_s: float = param(0.0, unit="s", lo=0.0, hi=3600.0, doc="time to hold once reached")
+    yaw_deg: float = param(0.0, unit="deg", lo=-180.0, hi=180.0, doc="heading, from east")
+    timeout_s: float | None = param(
+        None,
+        unit="s",
+        lo=0.0,
+        hi=3600.0,
+        doc="the setpoint there this long but not the vehicle: hold it anyway (null: wait)",
+    )
+
+
+def waypoint_items(
+    waypoints: tuple[Waypoint, ...], takeoff_altitude_m: float, land: bool, origin: Home
+) -> tuple[MissionItem, ...]:
+    """Take off, fly the local waypoints (`origin` at z = 0), land below the last one."""
+    items = [item_at(NAV_TAKEOFF, origin, None, param4=math.nan)]
+    items[0] = MissionItem(NAV_TAKEOFF, z=takeoff_altitude_m)
+    for wp in waypoints:
+        yaw = (90.0 - wp.yaw_deg + 180.0) % 360.0 - 180.0
+        items.append(
+            item_at(NAV_WAYPOINT, origin, wp.position_m, wp.hold_s, wp.acceptance_radius_m, yaw)
+        )
+    if land:
+        last = waypoints[-1].position_m
+        items.append(item_at(NAV_LAND, origin, (last[0], last[1], 0.0)))
+    return tuple(items)

@@ -10,14 +10,22 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from autopilot.commander import CommanderParams, CommanderState, Mission, Mode, command
-from autopilot.controller import ControllerParams, FlightState, control
-from autopilot.ground_models import GroundEffectInputs, GroundEffectModel
+from autopilot import requests
+from autopilot.commander import CommanderState, Phase, command
+from autopilot.controller import FlightState, control
+from autopilot.gcs_link import GcsLink
+from autopilot.ground_models import GroundEffectInputs, GroundEffectModel, make_model
+from autopilot.ground_station import GroundStation, StepInput
 from autopilot.metrics import COLUMNS, flight_metrics, trajectory_sha256
+from autopilot.mission_items import MissionItem
+from autopilot.modes import FlightMode
+from autopilot.params import ParamStore
+from autopilot.signing import Signing
 from autopilot.simlink import LinkLost, SimLink, Step
 from simbridge.frames import (
     Vec3,
@@ -32,21 +40,28 @@ from simbridge.hil import RAD_S_TO_RPM
 from simbridge.rotors import Quad
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
-MODES = [m.value for m in Mode]
+MODES = [p.value for p in Phase]
+AUTO_ARM_AFTER_S = 0.2  # --auto-start: arm once the sensors have been healthy this long
 
 
 @dataclass(frozen=True)
 class AutopilotConfig:
     sim_url: str
-    mission: Mission
     vehicle: Vehicle
-    model: GroundEffectModel
+    params: ParamStore
     origin: tuple[float, float, float]  # lat deg, lon deg, alt m of the local frame's origin
-    controller: ControllerParams = ControllerParams()
-    commander: CommanderParams = CommanderParams()
+    network: str | Path | None = None  # the neural model's weights (default: by rho)
+    mission: tuple[MissionItem, ...] = ()  # loaded before any ground station speaks
+    auto_start: bool = False  # arm and start the mission without a ground station
+    exit_after_landing: bool = True  # end once a flight has landed and settled
+    identity: str = "px4"
+    gcs_urls: tuple[str, ...] = ()
+    signing: Signing | None = None
     link_timeout_s: float = 1.0
     settle_after_landing_s: float = 0.5  # keep logging after disarm, to see any bounce
     max_flight_s: float = 900.0
+    should_stop: Callable[[], bool] = lambda: False  # a signal asked the loop to end
+    on_event: Callable[[float, str], None] | None = None  # modes, arming, failsafes
     record_hz: float = 0.0  # > 0: record learning samples at this rate (thesis: 100 Hz)
     stop_after_samples: int | None = None  # end the flight once this many are recorded
     on_sample: Callable[[int], None] | None = None  # told the count of recorded samples
@@ -100,7 +115,7 @@ def estimate_height(
     return previous + state.velocity_m_s[2] * dt_s
 
 
-RECORDED_MODES = (Mode.TAKING_OFF, Mode.FLYING, Mode.HOLDING, Mode.LANDING)
+RECORDED_PHASES = (Phase.TAKING_OFF, Phase.FLYING, Phase.HOLDING, Phase.LANDING)
 # Samples are taken in the air only: on the ground the contact force would pass for ground
 # effect in equation 3.16.
 AIRBORNE_MARGIN_M = 0.002
@@ -153,22 +168,67 @@ def fixed_point_step(previous: Vec3, target: Vec3, rotor_thrust_n: float) -> Vec
     )
 
 
+class Tuning:
+    """The parameter-derived settings, rebuilt only when a parameter changes."""
+
+    def __init__(self, config: AutopilotConfig) -> None:
+        self.config = config
+        self.values: dict[str, float] = {}
+        self.model_key: tuple[str, float] | None = None
+        self.model: GroundEffectModel | None = None
+        self.refresh()
+
+    def refresh(self) -> bool:
+        store = self.config.params
+        if store.values == self.values:
+            return False
+        self.values = dict(store.values)
+        self.controller = store.controller()
+        self.commander = store.commander()
+        gains = self.controller
+        # the speed limits' lead: steady speed = error * a0 / a1 (commander.limited_setpoint)
+        self.lead_s = gains.position_d / gains.position_p if gains.position_p > 0 else 2.0
+        key = store.model()
+        if key != self.model_key:
+            self.model_key = key
+            self.model = make_model(key[0], self.config.vehicle, key[1], self.config.network)
+        return True
+
+
+def landing_target_xy(cmd: CommanderState) -> tuple[float, float] | None:
+    """Where the mission meant to land: its landing item's position, else the last waypoint
+    flown before it, else home (a return)."""
+    last = None
+    for step in cmd.plan:
+        if step.kind == "land":
+            return step.position_m[:2] if step.position_m is not None else last
+        if step.kind == "return":
+            return cmd.home_m[:2] if cmd.home_m is not None else last
+        if step.position_m is not None:
+            last = step.position_m[:2]
+    return None
+
+
 def fly_mission(config: AutopilotConfig) -> Flight:
-    """Fly the mission against the simulator at `config.sim_url`; the flight's log and figures."""
+    """Run the autopilot against the simulator at `config.sim_url` until the flight ends."""
     vehicle = config.vehicle
     resting_height = vehicle.body_size_m[2] / 2.0  # the range sensor sits at the centre of mass
     channels = vehicle.actuator_channels
     n_max = vehicle.max_rotor_speed_rad_s
+    tuning = Tuning(config)
     rows: list[tuple[float, ...]] = []
     timings: list[float] = []
     speeds = (0.0, 0.0, 0.0, 0.0)
     ge = (0.0, 0.0, 0.0)
     height: float | None = None
     last_t = 0.0
-    cmd_state: CommanderState | None = None
+    cmd_state = CommanderState()
     ended = "landed"
     samples: list[tuple[float, ...]] = []
     next_sample_s = 0.0
+    on_event = config.on_event or (lambda t, text: None)
+    gcs = GcsLink(list(config.gcs_urls), config.signing)
+    station = GroundStation(gcs, config.params, config.identity, config.origin, on_event)
     link = SimLink(config.sim_url, timeout_s=config.link_timeout_s)
     wall0 = time.perf_counter()
     try:
@@ -179,16 +239,30 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             state = flight_state(step, config.origin)
             height = estimate_height(height, range_reading_m(step), state, t - last_t)
             last_t = t
-            if cmd_state is None:
-                cmd_state = CommanderState(since_s=t)
+            wall = time.monotonic()
+            inp = StepInput(t, wall, state, height, resting_height)
+            if not rows and config.mission:
+                cmd_state = station.load_mission(cmd_state, config.mission)
+            cmd_state = station.before_step(cmd_state, inp)
+            if (
+                config.auto_start
+                and cmd_state.phase == Phase.DISARMED
+                and t >= AUTO_ARM_AFTER_S
+                and cmd_state.touchdown_s is None
+            ):
+                cmd_state, _ = requests.arm(cmd_state, t, state.position_m, None, False)
+                cmd_state, _ = requests.set_mode(
+                    cmd_state, FlightMode.MISSION, t, state.position_m, tuning.commander
+                )
+            tuning.refresh()
             cmd = command(
                 cmd_state,
-                config.mission,
-                config.commander,
+                tuning.commander,
                 t,
                 state.position_m,
                 height,
                 resting_height,
+                tuning.lead_s,
             )
             cmd_state = cmd.state
             airborne = height > resting_height + AIRBORNE_MARGIN_M
@@ -196,7 +270,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 config.record_hz > 0.0
                 and t >= next_sample_s
                 and airborne
-                and cmd_state.mode in RECORDED_MODES
+                and cmd_state.phase in RECORDED_PHASES
             ):
                 samples.append(learning_sample(t, step, state, height, speeds, vehicle))
                 period = 1.0 / config.record_hz  # on a 100 Hz schedule, 250 Hz steps
@@ -211,41 +285,47 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                     break
             if cmd.setpoint is not None:
                 t0 = time.perf_counter()
-                target = config.model.predict(
+                target = tuning.model.predict(
                     GroundEffectInputs(height, state.velocity_m_s, state.quaternion, speeds)
                 )
                 rotor_thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in speeds)
                 ge = fixed_point_step(ge, target, rotor_thrust)
                 speeds = control(
-                    state, cmd.setpoint, ge, vehicle, config.controller
+                    state, cmd.setpoint, ge, vehicle, tuning.controller
                 ).rotor_speeds_rad_s
                 timings.append(time.perf_counter() - t0)
             else:
                 speeds, ge = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
             link.send(t_us, tuple(n / n_max for n in speeds), channels, cmd.armed)
+            station.after_step(cmd_state, inp, cmd.reached, cmd.events)
             zd = cmd.setpoint.position_m[2] if cmd.setpoint is not None else math.nan
             p, v = state.position_m, state.velocity_m_s
             rows.append(
-                (t, p[0], p[1], p[2], v[0], v[1], v[2], zd, height, MODES.index(cmd_state.mode))
+                (t, p[0], p[1], p[2], v[0], v[1], v[2], zd, height, MODES.index(cmd_state.phase))
             )
             if (
-                cmd_state.mode == Mode.LANDED
+                config.exit_after_landing
+                and cmd_state.phase == Phase.LANDED
                 and t - (cmd_state.touchdown_s or t) >= config.settle_after_landing_s
             ):
                 break
             if t >= config.max_flight_s:
                 ended = "mission time limit"
                 break
+            if config.should_stop():
+                ended = "stopped"
+                break
     except LinkLost as lost:
         ended = str(lost)
     finally:
         link.close()
+        station.save_signing(time.monotonic())
+        gcs.close()
     wall = time.perf_counter() - wall0
     log = np.asarray(rows, dtype=float).reshape(-1, len(COLUMNS))
-    last_xy = config.mission.waypoints[-1].position_m[:2] if config.mission.land else None
     summary: dict[str, Any] = {"ended": ended, "landed": ended == "landed"}
     if len(log):
-        summary.update(flight_metrics(log, MODES, last_xy, resting_height))
+        summary.update(flight_metrics(log, MODES, landing_target_xy(cmd_state), resting_height))
         sim_s = float(log[-1, 0] - log[0, 0])
         summary.update(
             sim_s=sim_s,
@@ -260,6 +340,12 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             controller_us_p50=float(np.percentile(us, 50)),
             controller_us_p99=float(np.percentile(us, 99)),
         )
-    summary.update(model=config.model.name, malformed=link.malformed, unknown=link.unknown)
+    summary.update(
+        model=tuning.model.name,
+        malformed=link.malformed,
+        unknown=link.unknown,
+        gcs=gcs.counters.as_dict(),
+        mission_items=len(station.items),
+    )
     data = np.asarray(samples, dtype=float) if samples else None
     return Flight(log=log, summary=summary, ended=ended, samples=data)

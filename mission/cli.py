@@ -35,12 +35,18 @@ def _port(text: str) -> int:
     return value
 
 
-def _model_options(p: argparse.ArgumentParser, rho_default: float | None = 1.0) -> None:
+def _model_options(
+    p: argparse.ArgumentParser,
+    rho_default: float | None = 1.0,
+    model_default: str | None = "analytic",
+) -> None:
     p.add_argument(
         "--model",
-        default="analytic",
+        default=model_default,
         choices=["none", "analytic", "neural"],
-        help="ground-effect model of the controller (default: analytic)",
+        help="ground-effect model of the controller (default: "
+        + (model_default or "parameter GFX_GE_MODEL, analytic")
+        + ")",
     )
     p.add_argument(
         "--rho",
@@ -52,6 +58,43 @@ def _model_options(p: argparse.ArgumentParser, rho_default: float | None = 1.0) 
         "--network",
         help="model file or packaged name for --model neural "
         "(default: the packaged network trained nearest --rho)",
+    )
+
+
+def _gcs_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--out",
+        action="append",
+        metavar="URL",
+        help="ground-station endpoint, repeatable: udpout:HOST:PORT, udpin:HOST:PORT, "
+        "tcpin:HOST:PORT (default: udpout:127.0.0.1:14550 and udpin:0.0.0.0:14540)",
+    )
+    p.add_argument("--no-gcs", action="store_true", help="no ground-station endpoint at all")
+    p.add_argument(
+        "--identity",
+        choices=["px4", "ardupilot"],
+        default="px4",
+        help="autopilot type and mode numbering in HEARTBEAT (default: px4)",
+    )
+    p.add_argument(
+        "--params-file",
+        type=Path,
+        default=DEFAULT_LOGS / "params.yaml",
+        help="YAML file parameters set over MAVLink persist in (default: logs/params.yaml; "
+        "none: nothing persists)",
+    )
+    p.add_argument(
+        "--param",
+        action="append",
+        metavar="NAME=VALUE",
+        default=[],
+        help="a parameter for this run only, repeatable (e.g. --param MIS_TAKEOFF_ALT=2)",
+    )
+    p.add_argument(
+        "--signing-key-file",
+        type=Path,
+        help="sign MAVLink 2 to ground stations and accept only signed packets; the file "
+        "holds 64 hex digits or a passphrase",
     )
 
 
@@ -112,12 +155,26 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=commands.cmd_bench)
 
-    p = sub.add_parser("autopilot", help="run the autopilot against a PX4-protocol simulator")
+    p = sub.add_parser(
+        "autopilot",
+        help="run the autopilot: PX4 simulator protocol to the sim, MAVLink to ground stations",
+    )
     p.add_argument(
         "--sim", default="tcp:127.0.0.1:4560", help="simulator URL (default: tcp:127.0.0.1:4560)"
     )
-    p.add_argument("--mission", type=Path, required=True, help="mission YAML")
-    _model_options(p)
+    p.add_argument("--mission", type=Path, help="a mission file to load before any upload")
+    p.add_argument(
+        "--auto-start",
+        action="store_true",
+        help="arm and fly --mission at once, without a ground station (reproducible runs)",
+    )
+    p.add_argument(
+        "--exit-after-landing",
+        action="store_true",
+        help="end (printing the summary) once a flight has landed and disarmed",
+    )
+    _model_options(p, rho_default=None, model_default=None)
+    _gcs_options(p)
     p.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
     p.add_argument("--origin", metavar="LAT,LON,ALT", help="geodetic origin of the local frame")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")

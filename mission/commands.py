@@ -7,7 +7,10 @@ import json
 import signal
 import sys
 
+from autopilot.params import MODEL_NAMES
 from simbridge.config import ConfigError
+
+DEFAULT_GCS_URLS = ("udpout:127.0.0.1:14550", "udpin:0.0.0.0:14540")
 
 
 def _terminate(_signum: int, _frame: object) -> None:
@@ -64,15 +67,32 @@ def _origin(text: str) -> tuple[float, float, float]:
     return (lat, lon, alt)
 
 
-def cmd_autopilot(args: argparse.Namespace) -> int:
-    import dataclasses
+def _param_overrides(args: argparse.Namespace) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for text in args.param:
+        name, sep, value = text.partition("=")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise ConfigError(f"--param {text!r}: expected NAME=NUMBER") from None
+        if not sep:
+            raise ConfigError(f"--param {text!r}: expected NAME=NUMBER")
+    model = getattr(args, "model", None)
+    if model is not None:
+        out["GFX_GE_MODEL"] = float(MODEL_NAMES.index(model))
+    if getattr(args, "rho", None) is not None:
+        out["GFX_GE_RHO"] = args.rho
+    return out
 
+
+def cmd_autopilot(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from autopilot.commander import CommanderParams
-    from autopilot.ground_models import make_model
     from autopilot.metrics import COLUMNS
+    from autopilot.mission_items import Home
+    from autopilot.params import ParamStore
     from autopilot.runner import AutopilotConfig, fly_mission
+    from autopilot.signing import Signing
     from autopilot.simlink import LinkLost, parse_url
     from mission.missionfile import load_mission
     from simbridge.vehicle import load_vehicle
@@ -82,22 +102,45 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
         parse_url(args.sim)
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    mission, takeoff_altitude = load_mission(args.mission)
+    if args.auto_start and args.mission is None:
+        raise ConfigError("--auto-start: needs --mission")
     vehicle = load_vehicle(args.vehicle)
     if args.origin:
         origin = _origin(args.origin)
     else:
         o = load_world("default").origin
         origin = (o.lat_deg, o.lon_deg, o.alt_m)
+    overrides = _param_overrides(args)
+    items: tuple = ()
+    if args.mission is not None:
+        local = load_mission(args.mission)
+        items = local.items(Home(*origin))
+        if local.waypoint_timeout_s is not None and "GFX_WP_TIMEOUT" not in overrides:
+            overrides["GFX_WP_TIMEOUT"] = local.waypoint_timeout_s
+    params_file = None if str(args.params_file) == "none" else args.params_file
+    params = ParamStore(params_file, overrides)
+    gcs_urls = () if args.no_gcs else tuple(args.out or DEFAULT_GCS_URLS)
+    stop = []
     config = AutopilotConfig(
         sim_url=args.sim,
-        mission=mission,
         vehicle=vehicle,
-        model=make_model(args.model, vehicle, args.rho, args.network),
+        params=params,
         origin=origin,
-        commander=dataclasses.replace(CommanderParams(), takeoff_altitude_m=takeoff_altitude),
+        network=args.network,
+        mission=items,
+        auto_start=args.auto_start,
+        exit_after_landing=args.exit_after_landing or args.auto_start,
+        identity=args.identity,
+        gcs_urls=gcs_urls,
+        signing=Signing(args.signing_key_file) if args.signing_key_file else None,
+        should_stop=lambda: bool(stop),
     )
-    signal.signal(signal.SIGTERM, _terminate)
+
+    def on_signal(signum: int, frame: object) -> None:
+        stop.append(signum)
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
     try:
         flight = fly_mission(config)
     except LinkLost as lost:
@@ -106,7 +149,7 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
     if args.trajectory:
         args.trajectory.parent.mkdir(parents=True, exist_ok=True)
         np.savez(args.trajectory, log=flight.log, columns=np.array(COLUMNS))
-    summary = dict(flight.summary, rho=args.rho)
+    summary = dict(flight.summary, rho=params.model()[1])
     if args.json:
         print(json.dumps(summary), flush=True)
     else:
@@ -116,7 +159,7 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
                 f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in summary.items()
             )
         )
-    if not flight.summary["landed"]:
+    if not flight.summary["landed"] and flight.ended != "stopped":
         print(f"groundfx autopilot: {flight.ended}", file=sys.stderr)
         return 3
     return 0

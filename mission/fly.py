@@ -22,7 +22,8 @@ def default_rho(world_name: str) -> float:
 
 
 def autopilot_command(sim_port: int, mission_path: Path, *options: str) -> list[str]:
-    """The command line of an autopilot process flying `mission_path` against a local sim."""
+    """The command line of an autopilot process flying `mission_path` against a local sim on
+    its own, with no ground station (reproducible: arming and take-off at fixed sim times)."""
     return [
         sys.executable,
         "-m",
@@ -32,6 +33,10 @@ def autopilot_command(sim_port: int, mission_path: Path, *options: str) -> list[
         f"tcp:127.0.0.1:{sim_port}",
         "--mission",
         str(mission_path),
+        "--auto-start",
+        "--no-gcs",
+        "--params-file",
+        "none",  # a fresh vehicle: defaults and the options given
         *options,
     ]
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import yaml
 from tqdm import tqdm
 
-from autopilot.commander import CommanderParams, Mission
-from autopilot.ground_models import AnalyticGroundEffect
+from autopilot.mission_items import Home, waypoint_items
+from autopilot.params import MODEL_NAMES, ParamStore
 from autopilot.runner import AutopilotConfig, fly_mission
 from learner.dataset import save_dataset
 from learner.sampling import thesis_waypoints
@@ -34,7 +34,18 @@ def gather(
     world_path.write_text(_with_rho(resolve_world_path(world).read_text(), rho))
     vehicle = load_vehicle(world_obj.vehicle)
     # about one waypoint per 1.5 s of flight: plenty for the samples asked
-    mission = Mission(waypoints=thesis_waypoints(seed, samples // 100 + 20), land=False)
+    o = world_obj.origin
+    origin = (o.lat_deg, o.lon_deg, o.alt_m)
+    waypoints = thesis_waypoints(seed, samples // 100 + 20)
+    mission = waypoint_items(waypoints, 0.3, False, Home(*origin))
+    params = ParamStore(
+        None,
+        {
+            "GFX_GE_MODEL": MODEL_NAMES.index("analytic"),
+            "GFX_GE_RHO": rho,
+            "GFX_WP_TIMEOUT": max(w.timeout_s or 0.0 for w in waypoints),
+        },
+    )
     bar = tqdm(total=samples, unit="sample", desc=f"gather rho={rho:g}", disable=not progress)
     counted = [0]
 
@@ -43,14 +54,13 @@ def gather(
         counted[0] = n
 
     sim, port = start_sim(world_path, speedup="max")
-    o = world_obj.origin
     config = AutopilotConfig(
         sim_url=f"tcp:127.0.0.1:{port}",
-        mission=mission,
         vehicle=vehicle,
-        model=AnalyticGroundEffect(vehicle, rho),
-        origin=(o.lat_deg, o.lon_deg, o.alt_m),
-        commander=dataclasses.replace(CommanderParams(), takeoff_altitude_m=0.3),
+        params=params,
+        origin=origin,
+        mission=mission,
+        auto_start=True,
         record_hz=SAMPLE_HZ,
         stop_after_samples=samples,
         on_sample=on_sample,

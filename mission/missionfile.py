@@ -1,4 +1,4 @@
-"""Mission files: the minimal YAML form (local waypoints), validated into a `Mission`.
+"""Mission files: the minimal YAML form (local waypoints), validated into mission items.
 
 takeoff_altitude_m: 1.0          # above the start point
 waypoints:
@@ -13,8 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from autopilot.commander import Mission
-from autopilot.navigator import Waypoint
+from autopilot.mission_items import Home, MissionItem, Waypoint, waypoint_items
 from simbridge.config import ConfigError, build, load_yaml, param
 
 
@@ -24,16 +23,32 @@ class MissionFile:
     land: bool = param(True, doc="land below the last waypoint")
 
 
-def parse_mission(data: dict[str, Any], where: str) -> tuple[Mission, float]:
+@dataclass(frozen=True)
+class LocalMission:
+    waypoints: tuple[Waypoint, ...]
+    takeoff_altitude_m: float
+    land: bool
+
+    def items(self, origin: Home) -> tuple[MissionItem, ...]:
+        return waypoint_items(self.waypoints, self.takeoff_altitude_m, self.land, origin)
+
+    @property
+    def waypoint_timeout_s(self) -> float | None:
+        """The longest waypoint timeout: MAVLink items have no field for it, the vehicle has
+        a parameter (GFX_WP_TIMEOUT)."""
+        timeouts = [w.timeout_s for w in self.waypoints if w.timeout_s is not None]
+        return max(timeouts) if timeouts else None
+
+
+def parse_mission(data: dict[str, Any], where: str) -> LocalMission:
     data = dict(data)
     entries = data.pop("waypoints", None)
     head = build(MissionFile, {k: v for k, v in data.items() if k != "name"}, where)
     if not isinstance(entries, list) or not entries:
         raise ConfigError(f"{where}: waypoints: expected a non-empty list of waypoints")
     waypoints = tuple(build(Waypoint, e, f"{where}: waypoints[{i}]") for i, e in enumerate(entries))
-    return Mission(waypoints=waypoints, land=head.land), head.takeoff_altitude_m
+    return LocalMission(waypoints, head.takeoff_altitude_m, head.land)
 
 
-def load_mission(path: str | Path) -> tuple[Mission, float]:
-    """(mission, take-off altitude) from a mission YAML."""
+def load_mission(path: str | Path) -> LocalMission:
     return parse_mission(load_yaml(Path(path)), str(path))

@@ -1,59 +1,102 @@
-"""Navigator and commander as pure functions: a mission's life from the ground to the ground."""
+"""Commander, requests and modes as pure functions: a mission's life from the ground to the
+ground, speed limits, mode numbering and idempotent requests."""
 
 from __future__ import annotations
 
 import pytest
 
-from autopilot.commander import CommanderParams, CommanderState, Mission, Mode, command
-from autopilot.navigator import NavigatorState, Waypoint, navigate
+from autopilot import requests
+from autopilot.commander import CommanderParams, CommanderState, Phase, command, limited_setpoint
+from autopilot.mission_items import PlanStep
+from autopilot.modes import FlightMode, custom_mode, decode_mode
 
-WPS = (Waypoint((0.0, 0.0, 1.0), 0.05, 1.0), Waypoint((1.0, 0.0, 1.0), 0.05, 0.5))
-
-
-def test_navigator_reaches_holds_and_moves_on():
-    nav = navigate(NavigatorState(), WPS, (0.0, 0.0, 0.5), 0.0)
-    assert nav.setpoint.position_m == (0.0, 0.0, 1.0) and not nav.holding
-    nav = navigate(nav.state, WPS, (0.0, 0.0, 0.97), 2.0)
-    assert nav.holding and nav.state.reached_at_s == 2.0
-    nav = navigate(nav.state, WPS, (0.0, 0.0, 1.0), 2.9)
-    assert nav.holding and nav.state.index == 0
-    nav = navigate(nav.state, WPS, (0.0, 0.0, 1.0), 3.0)
-    assert nav.setpoint.position_m == (1.0, 0.0, 1.0) and nav.state.index == 1
-    nav = navigate(nav.state, WPS, (1.0, 0.0, 1.0), 5.0)
-    nav = navigate(nav.state, WPS, (1.0, 0.0, 1.0), 5.5)
-    assert nav.done
+REST = 0.0126
+PARAMS = CommanderParams(spin_up_s=0.2, takeoff_altitude_m=1.0, cruise_speed_m_s=0.5)
+PLAN = (
+    PlanStep(0, "takeoff", altitude_m=1.0),
+    PlanStep(1, "waypoint", (0.5, 0.0, 1.0), hold_s=1.0),
+    PlanStep(2, "speed", speed_m_s=2.0),
+    PlanStep(3, "waypoint", (3.0, 0.0, 1.0)),
+    PlanStep(4, "land", (3.0, 0.0, 0.0)),
+)
 
 
-def test_a_waypoint_not_reached_in_time_is_held_anyway():
-    wps = (Waypoint((0.0, 0.0, 0.03), 0.01, 2.0, timeout_s=8.0),)
-    nav = navigate(NavigatorState(), wps, (0.0, 0.0, 0.15), 10.0)
-    nav = navigate(nav.state, wps, (0.0, 0.0, 0.15), 17.9)
-    assert not nav.holding
-    nav = navigate(nav.state, wps, (0.0, 0.0, 0.15), 18.0)
-    assert nav.holding
-
-
-def test_commander_arms_takes_off_flies_lands_and_disarms():
-    params = CommanderParams(arm_delay_s=0.1, spin_up_s=0.2, takeoff_altitude_m=1.0)
-    mission = Mission(waypoints=(Waypoint((0.5, 0.0, 1.0), 0.05, 0.0),))
-    rest = 0.0126
-    s = CommanderState(since_s=0.0)
-    c = command(s, mission, params, 0.05, (0.0, 0.0, rest), rest, rest)
-    assert c.state.mode == Mode.DISARMED and not c.armed and c.setpoint is None
-    c = command(c.state, mission, params, 0.1, (0.0, 0.0, rest), rest, rest)
-    assert c.state.mode == Mode.ARMED and c.armed and c.setpoint is None
-    c = command(c.state, mission, params, 0.31, (0.0, 0.0, rest), rest, rest)
-    assert c.state.mode == Mode.TAKING_OFF and c.setpoint.position_m == pytest.approx(
-        (0.0, 0.0, 1.0126)
+def step(c, t, position, height=None):
+    return command(
+        c.state if hasattr(c, "state") else c, PARAMS, t, position, height or position[2], REST
     )
-    c = command(c.state, mission, params, 5.0, (0.0, 0.0, 1.0), 1.0, rest)
-    assert c.state.mode == Mode.FLYING and c.setpoint.position_m == (0.5, 0.0, 1.0)
-    c = command(c.state, mission, params, 8.0, (0.5, 0.0, 1.0), 1.0, rest)
-    assert c.state.mode == Mode.LANDING
-    c = command(c.state, mission, params, 9.0, (0.5, 0.0, 0.95), 0.95, rest)
-    assert c.setpoint.position_m[2] == pytest.approx(1.0 - 0.1 * 1.0)  # sinking at 0.1 m/s
-    assert c.setpoint.velocity_m_s == (0.0, 0.0, -0.1)
-    c = command(c.state, mission, params, 20.0, (0.5, 0.0, rest), rest + 0.001, rest)
-    assert c.state.mode == Mode.LANDING and c.armed  # down, not yet for long enough
-    c = command(c.state, mission, params, 20.1, (0.5, 0.0, rest), rest, rest)
-    assert c.state.mode == Mode.LANDED and not c.armed and c.state.touchdown_s == 20.1
+
+
+def test_a_mission_from_arming_to_disarm():
+    s = requests.load_plan(CommanderState(), PLAN)
+    c = step(s, 0.0, (0.0, 0.0, REST))
+    assert c.state.phase == Phase.DISARMED and not c.armed and c.setpoint is None
+    s, verdict = requests.arm(c.state, 0.1, (0.0, 0.0, REST), None, False)
+    assert verdict.accepted
+    s, verdict = requests.set_mode(s, FlightMode.MISSION, 0.1, (0.0, 0.0, REST), PARAMS)
+    assert verdict.accepted
+    c = step(s, 0.2, (0.0, 0.0, REST))
+    assert c.state.phase == Phase.ARMED and c.armed and c.setpoint is None  # spinning up
+    c = step(c, 0.31, (0.0, 0.0, REST))
+    assert c.state.phase == Phase.TAKING_OFF
+    assert c.setpoint.position_m == pytest.approx((0.0, 0.0, 1.0126))  # a 1 m step: in reach
+    c = step(c, 4.0, (0.0, 0.0, 1.0))
+    assert c.state.phase == Phase.HOLDING  # at the take-off altitude
+    c = step(c, 4.004, (0.0, 0.0, 1.0))
+    assert c.reached == (0,) and c.setpoint.position_m == (0.5, 0.0, 1.0)
+    c = step(c, 6.0, (0.5, 0.0, 1.0))
+    assert c.state.phase == Phase.HOLDING
+    c = step(c, 7.0, (0.5, 0.0, 1.0))
+    # waypoint 1 held, speed item 2 taken: waypoint 3 is 2.5 m away, the lead at 2 m/s is 4 m
+    assert c.reached == (1, 2) and c.setpoint.position_m == pytest.approx((3.0, 0.0, 1.0))
+    c = step(c, 9.0, (3.0, 0.0, 1.0))
+    c = step(c, 9.004, (3.0, 0.0, 1.0))
+    assert c.reached == (3,)
+    c = step(c, 9.008, (3.0, 0.0, 1.0))
+    c = step(c, 9.012, (3.0, 0.0, 1.0))
+    assert c.state.phase == Phase.LANDING
+    c = step(c, 10.012, (3.0, 0.0, 0.95))
+    assert c.setpoint.position_m[2] == pytest.approx(0.9, abs=1e-3)  # sinking at 0.1 m/s
+    c = step(c, 20.0, (3.0, 0.0, REST), REST + 0.001)
+    assert c.state.phase == Phase.LANDING and c.armed  # down, not yet for long enough
+    c = step(c, 20.1, (3.0, 0.0, REST), REST)
+    assert c.state.phase == Phase.LANDED and not c.armed and c.reached == (4,)
+    assert c.state.mission_done
+
+
+def test_speed_limits_clip_the_setpoint_not_the_short_moves():
+    lead = 2.0  # a1 / a0 of the thesis's gains
+    assert limited_setpoint((0, 0, 1), (0.5, 0, 1), lead, 0.5, 0.5, 0.5) == (0.5, 0, 1)
+    far = limited_setpoint((0, 0, 1), (10.0, 0, 1), lead, 0.5, 0.5, 0.5)
+    assert far == pytest.approx((1.0, 0, 1))  # steady speed 1 m * a0 / a1 = 0.5 m/s
+    down = limited_setpoint((0, 0, 5), (0, 0, 0.03), lead, 0.5, 0.5, 0.25)
+    assert down == pytest.approx((0, 0, 4.5))
+
+
+def test_requests_are_idempotent_and_refusals_say_why():
+    s, v = requests.arm(CommanderState(), 1.0, (0, 0, REST), "sensors not ready", False)
+    assert not v.accepted and "sensors not ready" in v.reason and s.phase == Phase.DISARMED
+    s, v = requests.arm(s, 1.0, (0, 0, REST), "sensors not ready", True)  # forced
+    assert v.accepted and s.phase == Phase.ARMED
+    again, v = requests.arm(s, 1.5, (0, 0, REST), None, False)
+    assert v.accepted and again == s
+    _, v = requests.set_mode(s, FlightMode.MISSION, 2.0, (0, 0, REST), PARAMS)
+    assert not v.accepted and "no mission" in v.reason
+    _, v = requests.set_mode(s, FlightMode.LAND, 2.0, (0, 0, REST), PARAMS)
+    assert not v.accepted and "not flying" in v.reason
+    flying = requests.dataclasses.replace(s, phase=Phase.FLYING)
+    _, v = requests.disarm(flying, 3.0, False)
+    assert not v.accepted and "in the air" in v.reason
+    down, v = requests.disarm(flying, 3.0, True)
+    assert v.accepted and down.phase == Phase.DISARMED
+
+
+@pytest.mark.parametrize("mode", list(FlightMode))
+def test_mode_numbers_round_trip_under_both_identities(mode):
+    px4 = custom_mode(mode, "px4")
+    assert decode_mode("px4", px4) == mode  # SET_MODE's packed form
+    assert decode_mode("px4", (px4 >> 16) & 0xFF, (px4 >> 24) & 0xFF) == mode  # DO_SET_MODE
+    if mode != FlightMode.TAKEOFF:  # ArduCopter has no take-off mode
+        assert decode_mode("ardupilot", custom_mode(mode, "ardupilot")) == mode
+    assert custom_mode(FlightMode.MISSION, "px4") == 0x04040000
+    assert custom_mode(FlightMode.RETURN, "ardupilot") == 6

@@ -1,0 +1,532 @@
+"""The vehicle's side of the ground-station link: commands, parameters, missions, telemetry,
+failsafes. Called by the flight loop once per control step; never blocks.
+
+Simulated time paces telemetry (as in PX4's lockstep SITL); the wall clock paces what lives
+in the ground station's world: mission-transfer retries and the heartbeat-loss failsafe.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from autopilot import requests, telemetry
+from autopilot.commander import AIRBORNE_PHASES, CommanderState, Phase
+from autopilot.controller import FlightState, Setpoint
+from autopilot.gcs_link import GcsLink
+from autopilot.mission_items import Home, MissionItem, plan_steps
+from autopilot.mission_protocol import MissionProtocol, Outcome
+from autopilot.modes import FlightMode, decode_mode
+from autopilot.params import (
+    ACTION_HOLD,
+    ACTION_LAND,
+    ACTION_NAMES,
+    ACTION_RETURN,
+    ACTION_WARN,
+    ORDER,
+    SPECS,
+    ParamStore,
+)
+from simbridge.frames import local_to_geodetic, ned_to_enu
+from simbridge.hil import mavlink as mav
+
+ACCEPTED, DENIED = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_DENIED
+UNSUPPORTED, FAILED = mav.MAV_RESULT_UNSUPPORTED, mav.MAV_RESULT_FAILED
+FORCE_MAGIC = 21196  # ARM_DISARM param2: arm or disarm whatever the checks say
+REAL32 = mav.MAV_PARAM_TYPE_REAL32
+SIGNING_SAVE_S = 10.0  # wall seconds between saves of the signing timestamp
+ONE_SHOT = {
+    mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: "AUTOPILOT_VERSION",
+    mav.MAVLINK_MSG_ID_HOME_POSITION: "HOME_POSITION",
+    mav.MAVLINK_MSG_ID_HEARTBEAT: "HEARTBEAT",
+    mav.MAVLINK_MSG_ID_SYS_STATUS: "SYS_STATUS",
+    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: "EXTENDED_SYS_STATE",
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: "GLOBAL_POSITION_INT",
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: "LOCAL_POSITION_NED",
+    mav.MAVLINK_MSG_ID_ATTITUDE: "ATTITUDE",
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: "MISSION_CURRENT",
+}
+# SET_POSITION_TARGET_LOCAL_NED.type_mask bits: position ignored, velocity ignored
+IGNORE_POSITION = 0b111
+IGNORE_VELOCITY = 0b111000
+
+
+@dataclass
+class Failsafes:
+    gcs_seen: bool = False  # a ground station has sent a heartbeat
+    gcs_heard_wall_s: float = 0.0
+    gcs_lost: bool = False
+    fence_breached: bool = False
+
+
+@dataclass
+class StepInput:
+    time_s: float
+    wall_s: float
+    state: FlightState
+    height_m: float
+    resting_height_m: float
+
+
+@dataclass
+class GroundStation:
+    link: GcsLink
+    params: ParamStore
+    identity: str
+    origin: tuple[float, float, float]
+    on_event: Callable[[float, str], None] = lambda t, text: None
+    items: tuple[MissionItem, ...] = ()
+    streams: telemetry.Streams = field(default_factory=telemetry.Streams)
+    failsafes: Failsafes = field(default_factory=Failsafes)
+    initial_home_m: tuple[float, float, float] | None = None
+    signing_saved_wall_s: float = 0.0
+    last_mission_current: tuple[int, int, int] | None = None
+    surface_z: float | None = None  # local z of the surface under the vehicle on the ground
+    last_status: tuple[Any, ...] | None = None
+
+    def __post_init__(self) -> None:
+        self.protocol = MissionProtocol(self.identity)
+
+    # --- the per-step entry points ---------------------------------------------------------
+
+    def before_step(self, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        """Apply what the ground stations asked since the last step; check the failsafes."""
+        if self.initial_home_m is None:
+            self.initial_home_m = inp.state.position_m
+        if cmd.phase not in AIRBORNE_PHASES:
+            self.surface_z = inp.state.position_m[2] - inp.height_m
+        for m in self.link.poll(inp.wall_s):
+            try:
+                cmd = self._handle(m, cmd, inp)
+            except (ValueError, TypeError, OverflowError) as e:  # well-formed, nonsensical
+                self.link.counters.invalid += 1
+                self._text(inp, f"ignored {m.get_type()}: {e}", mav.MAV_SEVERITY_WARNING)
+        self._send_outcome(self.protocol.tick(inp.wall_s), inp)
+        return self._failsafes(cmd, inp)
+
+    def after_step(
+        self, cmd: CommanderState, inp: StepInput, reached: tuple[int, ...], events: tuple[str, ...]
+    ) -> None:
+        """Report what the step did, and the telemetry that is due."""
+        for index in reached:
+            self.on_event(inp.time_s, f"mission item {cmd.plan[index].seq} reached")
+            self.send(mav.MAVLink_mission_item_reached_message(cmd.plan[index].seq), inp)
+        for text in events:
+            self._text(inp, text)
+        if not self.link.endpoints:
+            return
+        snap = self._snapshot(cmd, inp)
+        due = self.streams.due(inp.time_s)
+        status = (snap.phase, snap.mode, snap.armed)
+        if status != self.last_status:  # tell at once, not at the next 1 Hz heartbeat
+            self.last_status = status
+            due = [*due, "HEARTBEAT", "EXTENDED_SYS_STATE"]
+        for name in dict.fromkeys(due):
+            self._send_named(name, snap, cmd, inp)
+        current = self._mission_current_key(cmd)
+        if current != self.last_mission_current:
+            self._send_named("MISSION_CURRENT", snap, cmd, inp)
+        if (
+            self.link.signing is not None
+            and inp.wall_s - self.signing_saved_wall_s > SIGNING_SAVE_S
+        ):
+            self.save_signing(inp.wall_s)
+
+    def save_signing(self, wall_s: float) -> None:
+        if self.link.signing is not None:
+            self.link.signing.save(self.link.signing_timestamp)
+            self.signing_saved_wall_s = wall_s
+
+    # --- sending ---------------------------------------------------------------------------
+
+    def send(self, message: Any, inp: StepInput) -> None:
+        self.link.send(message, inp.wall_s)
+
+    def _text(self, inp: StepInput, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
+        self.on_event(inp.time_s, text)
+        self.send(mav.MAVLink_statustext_message(severity, text[:50].encode(), 0, 0), inp)
+
+    def _snapshot(self, cmd: CommanderState, inp: StepInput) -> telemetry.Snapshot:
+        home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
+        return telemetry.Snapshot(
+            time_s=inp.time_s,
+            state=inp.state,
+            origin=self.origin,
+            home_m=home,
+            phase=cmd.phase,
+            mode=cmd.mode,
+            armed=cmd.phase not in (Phase.DISARMED, Phase.LANDED),
+            ready=self._not_ready(cmd, inp) is None,
+            identity=self.identity,
+        )
+
+    def _mission_current_key(self, cmd: CommanderState) -> tuple[int, int, int]:
+        if not self.items:
+            state = mav.MISSION_STATE_NO_MISSION
+        elif cmd.mission_done:
+            state = mav.MISSION_STATE_COMPLETE
+        elif cmd.mode == FlightMode.MISSION and cmd.phase in AIRBORNE_PHASES:
+            state = mav.MISSION_STATE_ACTIVE
+        elif cmd.mode == FlightMode.MISSION:
+            state = mav.MISSION_STATE_NOT_STARTED
+        else:
+            state = mav.MISSION_STATE_PAUSED if cmd.current > 0 else mav.MISSION_STATE_NOT_STARTED
+        seq = cmd.plan[cmd.current].seq if cmd.plan and cmd.current < len(cmd.plan) else 0
+        if cmd.mission_done:
+            seq = len(self.items)  # past the last item, as PX4 reports a finished mission
+        return seq, len(self.items), state
+
+    def _send_named(
+        self, name: str, snap: telemetry.Snapshot, cmd: CommanderState, inp: StepInput
+    ) -> None:
+        if name == "MISSION_CURRENT":
+            seq, total, state = self._mission_current_key(cmd)
+            self.last_mission_current = (seq, total, state)
+            mode = int(cmd.mode == FlightMode.MISSION)
+            self.send(mav.MAVLink_mission_current_message(seq, total, state, mode), inp)
+            return
+        if name == "SYS_STATUS":
+            c = self.link.counters
+            total = c.received + c.dropped
+            message = telemetry.sys_status(
+                snap, 100.0 * c.dropped / total if total else 0.0, c.dropped
+            )
+        elif name == "AUTOPILOT_VERSION":
+            message = telemetry.autopilot_version(self.identity)
+        else:
+            builder = {
+                "HEARTBEAT": telemetry.heartbeat,
+                "EXTENDED_SYS_STATE": telemetry.extended_sys_state,
+                "GLOBAL_POSITION_INT": telemetry.global_position_int,
+                "LOCAL_POSITION_NED": telemetry.local_position_ned,
+                "ATTITUDE": telemetry.attitude,
+                "HOME_POSITION": telemetry.home_position,
+            }[name]
+            message = builder(snap)
+        if message is not None:
+            self.send(message, inp)
+
+    def _send_outcome(self, outcome: Outcome, inp: StepInput) -> None:
+        for reply in outcome.replies:
+            self.send(reply, inp)
+        if outcome.text:
+            self._text(inp, outcome.text, mav.MAV_SEVERITY_WARNING)
+
+    # --- receiving -------------------------------------------------------------------------
+
+    def _handle(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        kind = m.get_type()
+        if kind == "HEARTBEAT":
+            if m.type == mav.MAV_TYPE_GCS or m.get_srcComponent() != self.link.compid:
+                self.failsafes.gcs_seen = True
+                self.failsafes.gcs_heard_wall_s = inp.wall_s
+                if self.failsafes.gcs_lost:
+                    self.failsafes.gcs_lost = False
+                    self._text(inp, "ground station link regained")
+            return cmd
+        if kind in ("COMMAND_LONG", "COMMAND_INT"):
+            return self._command(m, cmd, inp)
+        if kind == "SET_MODE":
+            mode = decode_mode(self.identity, int(m.custom_mode))
+            return self._mode(cmd, mode, inp, 11, (m.get_srcSystem(), m.get_srcComponent()))
+        if kind.startswith("PARAM_"):
+            return self._param(m, cmd, inp)
+        if kind.startswith("MISSION_") and kind != "MISSION_SET_CURRENT":
+            return self._mission(m, cmd, inp)
+        if kind == "MISSION_SET_CURRENT":
+            cmd, verdict = self._set_current(cmd, int(m.seq))
+            if not verdict.accepted:
+                self._text(inp, verdict.reason, mav.MAV_SEVERITY_WARNING)
+            return cmd
+        if kind == "SET_POSITION_TARGET_LOCAL_NED":
+            return self._offboard(m, cmd, inp)
+        if kind == "REQUEST_DATA_STREAM":
+            ids = telemetry.DATA_STREAMS.keys() if m.req_stream_id == 0 else [m.req_stream_id]
+            for stream_id in ids:
+                for name in telemetry.DATA_STREAMS.get(stream_id, ()):
+                    self.streams.set_rate(name, float(m.req_message_rate) if m.start_stop else 0.0)
+            return cmd
+        if kind == "FILE_TRANSFER_PROTOCOL":
+            self._ftp_nak(m, inp)
+            return cmd
+        return cmd
+
+    def _ack(self, m: Any, command: int, result: int, inp: StepInput, reason: str = "") -> None:
+        self.send(
+            mav.MAVLink_command_ack_message(
+                command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent()
+            ),
+            inp,
+        )
+        if reason:
+            self._text(inp, reason, mav.MAV_SEVERITY_WARNING)
+
+    def _not_ready(self, cmd: CommanderState, inp: StepInput) -> str | None:
+        if inp.time_s < 0.2:
+            return "sensors not ready"
+        if inp.height_m > inp.resting_height_m + 0.02:
+            return "not on the ground"
+        return None
+
+    def _command(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        c = int(m.command)
+        p = [m.param1, m.param2, m.param3, m.param4]
+        position = inp.state.position_m
+        t = inp.time_s
+        params = self.params.commander()
+        verdict = requests.OK
+        if c == mav.MAV_CMD_COMPONENT_ARM_DISARM:
+            force = round(p[1]) == FORCE_MAGIC if math.isfinite(p[1]) else False
+            if p[0] == 1.0:
+                cmd, verdict = requests.arm(cmd, t, position, self._not_ready(cmd, inp), force)
+                if verdict.accepted:
+                    self.on_event(t, "armed")
+            elif p[0] == 0.0:
+                cmd, verdict = requests.disarm(cmd, t, force)
+                if verdict.accepted:
+                    self.on_event(t, "disarmed")
+            else:
+                verdict = requests.Verdict(DENIED, f"ARM_DISARM param1 {p[0]:g}: expected 0 or 1")
+        elif c == mav.MAV_CMD_NAV_TAKEOFF:
+            if cmd.phase not in (Phase.ARMED,) and not requests.airborne(cmd):
+                verdict = requests.Verdict(DENIED, "take-off denied: arm first")
+            else:
+                altitude = None
+                z = m.param7 if m.get_type() == "COMMAND_LONG" else m.z
+                if self.identity == "ardupilot" and math.isfinite(z) and z > 0.0:
+                    altitude = float(z)
+                cmd = requests.dataclasses.replace(cmd, takeoff_altitude_m=altitude)
+                cmd, verdict = requests.set_mode(cmd, FlightMode.TAKEOFF, t, position, params)
+        elif c == mav.MAV_CMD_NAV_LAND:
+            cmd, verdict = requests.set_mode(cmd, FlightMode.LAND, t, position, params)
+        elif c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            cmd, verdict = requests.set_mode(cmd, FlightMode.RETURN, t, position, params)
+        elif c == mav.MAV_CMD_DO_SET_MODE:
+            if not int(p[0]) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+                verdict = requests.Verdict(DENIED, "set mode: only custom modes (param1 bit 0)")
+            else:
+                sub = int(p[2]) if self.identity == "px4" and math.isfinite(p[2]) else 0
+                mode = decode_mode(self.identity, int(p[1]), sub)
+                return self._mode(cmd, mode, inp, c, (m.get_srcSystem(), m.get_srcComponent()))
+        elif c == mav.MAV_CMD_MISSION_START:
+            if math.isfinite(p[0]) and p[0] > 0 and cmd.plan:
+                cmd, verdict = self._set_current(cmd, int(p[0]))
+            if verdict.accepted:
+                if cmd.mode == FlightMode.MISSION and cmd.mission_done:
+                    cmd = requests.dataclasses.replace(cmd, mode=FlightMode.HOLD)
+                cmd, verdict = requests.set_mode(cmd, FlightMode.MISSION, t, position, params)
+        elif c == mav.MAV_CMD_DO_CHANGE_SPEED:
+            cmd, verdict = requests.change_speed(cmd, float(p[1]))
+        elif c == mav.MAV_CMD_DO_SET_MISSION_CURRENT:
+            cmd, verdict = self._set_current(cmd, int(p[0]))
+        elif c == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
+            name = mav.mavlink_map[int(p[0])].msgname if int(p[0]) in mav.mavlink_map else None
+            if name is None or (
+                name not in telemetry.DEFAULT_RATES_HZ and name not in ONE_SHOT.values()
+            ):
+                verdict = requests.Verdict(UNSUPPORTED)
+            else:
+                interval_us = p[1]
+                hz = None if interval_us == 0 else (0.0 if interval_us < 0 else 1e6 / interval_us)
+                self.streams.set_rate(name, hz)
+        elif c in (
+            mav.MAV_CMD_REQUEST_MESSAGE,
+            mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+            mav.MAV_CMD_GET_HOME_POSITION,
+        ):
+            wanted = {
+                mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+                mav.MAV_CMD_GET_HOME_POSITION: mav.MAVLINK_MSG_ID_HOME_POSITION,
+            }.get(c, int(p[0]) if math.isfinite(p[0]) else -1)
+            name = ONE_SHOT.get(wanted)
+            if name is None:
+                verdict = requests.Verdict(UNSUPPORTED)
+            else:
+                self._ack(m, c, ACCEPTED, inp)
+                self._send_named(name, self._snapshot(cmd, inp), cmd, inp)
+                return cmd
+        else:
+            verdict = requests.Verdict(UNSUPPORTED)
+        self._ack(m, c, verdict.result, inp, verdict.reason)
+        return cmd
+
+    def _mode(
+        self,
+        cmd: CommanderState,
+        mode: FlightMode | None,
+        inp: StepInput,
+        command: int,
+        peer: tuple[int, int],
+    ) -> CommanderState:
+        if mode is None:
+            verdict = requests.Verdict(DENIED, "set mode: this vehicle has no such mode")
+        else:
+            params = self.params.commander()
+            position = inp.state.position_m
+            before = cmd.mode
+            cmd, verdict = requests.set_mode(cmd, mode, inp.time_s, position, params)
+            if verdict.accepted and cmd.mode != before:
+                self.on_event(inp.time_s, f"mode {cmd.mode}")
+        self.send(mav.MAVLink_command_ack_message(command, verdict.result, 0, 0, *peer), inp)
+        if verdict.reason:
+            self._text(inp, verdict.reason, mav.MAV_SEVERITY_WARNING)
+        return cmd
+
+    def _set_current(
+        self, cmd: CommanderState, seq: int
+    ) -> tuple[CommanderState, requests.Verdict]:
+        for index, step in enumerate(cmd.plan):
+            if step.seq == seq:
+                return requests.set_current(cmd, index)
+        return cmd, requests.Verdict(DENIED, f"no mission item {seq}")
+
+    def _offboard(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        if m.coordinate_frame != mav.MAV_FRAME_LOCAL_NED:
+            self.link.counters.invalid += 1
+            return cmd
+        if m.type_mask & IGNORE_POSITION:
+            self.link.counters.invalid += 1  # velocity-only targets: not supported
+            return cmd
+        values = (m.x, m.y, m.z)
+        if not all(math.isfinite(v) and abs(v) < 1e4 for v in values):
+            self.link.counters.invalid += 1
+            return cmd
+        velocity = (0.0, 0.0, 0.0)
+        if not m.type_mask & IGNORE_VELOCITY and all(
+            math.isfinite(v) and abs(v) < 100 for v in (m.vx, m.vy, m.vz)
+        ):
+            velocity = ned_to_enu((m.vx, m.vy, m.vz))
+        yaw = math.pi / 2 - m.yaw if math.isfinite(m.yaw) else 0.0  # NED heading -> ENU
+        setpoint = Setpoint(ned_to_enu(values), velocity_m_s=velocity, yaw_rad=yaw)
+        return requests.offboard_setpoint(cmd, setpoint, inp.time_s)
+
+    def _ftp_nak(self, m: Any, inp: StepInput) -> None:
+        """MAVLink-FTP is not offered: a NAK (opcode 129) with error FileNotFound (10), so
+        MAVProxy falls back to the parameter protocol at once."""
+        request = bytes(m.payload)
+        payload = bytearray(251)
+        payload[0:2] = request[0:2]  # sequence number of the request
+        payload[3] = 129  # NAK
+        payload[4] = 1  # size: one byte of error code
+        payload[5] = request[3] if len(request) > 3 else 0  # opcode being answered
+        payload[12] = 10  # FileNotFound
+        self.send(
+            mav.MAVLink_file_transfer_protocol_message(
+                0, m.get_srcSystem(), m.get_srcComponent(), list(payload)
+            ),
+            inp,
+        )
+
+    # --- parameters ------------------------------------------------------------------------
+
+    def _param_value(self, name: str) -> Any:
+        return mav.MAVLink_param_value_message(
+            name.encode(), self.params.values[name], REAL32, len(ORDER), ORDER.index(name)
+        )
+
+    def _param(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        kind = m.get_type()
+        if kind == "PARAM_REQUEST_LIST":
+            for name in ORDER:
+                self.send(self._param_value(name), inp)
+        elif kind == "PARAM_REQUEST_READ":
+            name = _param_name(m.param_id)
+            if m.param_index >= 0:
+                if m.param_index >= len(ORDER):
+                    self.link.counters.invalid += 1
+                    return cmd
+                name = ORDER[m.param_index]
+            if name in SPECS:
+                self.send(self._param_value(name), inp)
+            else:
+                self.link.counters.invalid += 1
+        elif kind == "PARAM_SET":
+            name = _param_name(m.param_id)
+            if name not in SPECS:
+                self.link.counters.invalid += 1
+                self._text(inp, f"unknown parameter {name}", mav.MAV_SEVERITY_WARNING)
+                return cmd
+            why = self.params.set(name, float(m.param_value))
+            if why is not None:
+                self._text(inp, why, mav.MAV_SEVERITY_WARNING)
+            else:
+                self.on_event(inp.time_s, f"parameter {name} = {self.params.values[name]:g}")
+            self.send(self._param_value(name), inp)  # the value in force, new or old
+        return cmd
+
+    # --- missions --------------------------------------------------------------------------
+
+    def home(self, cmd: CommanderState) -> Home:
+        home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
+        lat, lon = local_to_geodetic(self.origin[0], self.origin[1], home[0], home[1])
+        return Home(lat, lon, self.origin[2] + self.ground_z(home))
+
+    def ground_z(self, home_m: tuple[float, float, float]) -> float:
+        """The surface under home, which relative altitudes count from (a box top, say)."""
+        return self.surface_z if self.surface_z is not None else 0.0
+
+    def _mission(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        outcome = self.protocol.handle(
+            m, inp.wall_s, lambda: self.home(cmd), self.params.geofence(), cmd.current
+        )
+        self._send_outcome(outcome, inp)
+        if outcome.mission is not None or outcome.cleared:
+            self.items = outcome.mission or ()
+            cmd = requests.load_plan(cmd, self._plan(cmd, self.items))
+            self.on_event(inp.time_s, f"mission of {len(self.items)} items")
+        return cmd
+
+    def load_mission(self, cmd: CommanderState, items: tuple[MissionItem, ...]) -> CommanderState:
+        """A mission given on the command line, as if uploaded."""
+        self.items = self.protocol.items = items
+        return requests.load_plan(cmd, self._plan(cmd, items))
+
+    def _plan(self, cmd: CommanderState, items: tuple[MissionItem, ...]) -> tuple:
+        home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
+        origin = Home(*self.origin)
+        steps = plan_steps(items, origin, self.ground_z(home))
+        if self.identity == "ardupilot" and steps:
+            steps = steps[1:]  # ArduPilot's item 0 is home, not a place to fly to
+        return steps
+
+    # --- failsafes -------------------------------------------------------------------------
+
+    def _failsafes(self, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        fs = self.failsafes
+        settings = self.params.failsafe()
+        flying = cmd.phase in AIRBORNE_PHASES
+        lost = fs.gcs_seen and inp.wall_s - fs.gcs_heard_wall_s > settings.gcs_loss_timeout_s
+        if lost and not fs.gcs_lost:
+            fs.gcs_lost = True
+            if flying:
+                cmd = self._act(cmd, settings.gcs_loss_action, "ground station lost", inp)
+        home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
+        p = inp.state.position_m
+        fence = self.params.geofence()
+        breach = fence.breach(p[0] - home[0], p[1] - home[1], p[2] - home[2]) if flying else None
+        if breach is not None and not fs.fence_breached:
+            fs.fence_breached = True
+            cmd = self._act(cmd, settings.fence_action, f"geofence: {breach}", inp)
+        elif breach is None:
+            fs.fence_breached = False
+        return cmd
+
+    def _act(self, cmd: CommanderState, action: int, why: str, inp: StepInput) -> CommanderState:
+        mode = {ACTION_HOLD: FlightMode.HOLD, ACTION_RETURN: FlightMode.RETURN,
+                ACTION_LAND: FlightMode.LAND}.get(action)  # fmt: skip
+        self._text(
+            inp, f"failsafe: {why}: {ACTION_NAMES.get(action, action)}", mav.MAV_SEVERITY_CRITICAL
+        )
+        if mode is None or action == ACTION_WARN or cmd.mode == mode:
+            return cmd
+        position = inp.state.position_m
+        cmd, _ = requests.set_mode(cmd, mode, inp.time_s, position, self.params.commander())
+        return cmd
+
+
+def _param_name(raw: Any) -> str:
+    if isinstance(raw, bytes):
+        raw = raw.decode("ascii", "replace")
+    return str(raw).split("\x00", 1)[0]
