@@ -93,8 +93,8 @@ def describe(item: MissionItem, home: Home) -> str:
         return f"speed {item.param2:g} m/s" if item.param2 > 0 else "speed unchanged"
     if item.command == NAV_RETURN_TO_LAUNCH:
         return "return home and land"
-    east, north, up = local_offset(item, home)
-    place = f"east {east:.3f} north {north:.3f} m"
+    east, north, up = (round(v, 3) + 0.0 for v in local_offset(item, home))  # no "-0.000"
+    place = f"east {east:.2f} north {north:.2f} m"  # centimetres: the degE7 grid's resolution
     if item.command != NAV_WAYPOINT and (item.x, item.y) == (NO_POSITION, NO_POSITION):
         place = "where it stands"
     if item.command == NAV_TAKEOFF:
