@@ -7,25 +7,17 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from autopilot.mission_items import (
-    DO_CHANGE_SPEED,
-    NAV_LAND,
-    NAV_RETURN_TO_LAUNCH,
-    NAV_TAKEOFF,
-    NAV_WAYPOINT,
-    NO_POSITION,
-    Geofence,
-    Home,
-    MissionItem,
-    local_offset,
-)
-from mission.formats import FORMAT_NAMES, SUFFIXES, file_format, load_mission_file
-from mission.formats import save_mission_file as save
-from mission.plan_doc import MissionDoc, flip_yaw_deg
+if TYPE_CHECKING:
+    from autopilot.mission_items import Home, MissionItem
+    from mission.plan_doc import MissionDoc
+
+# The model and the formats are imported when a mission command runs: they bring pymavlink
+# and the simulator's modules, which `groundfx --help` and the other commands need not wait for.
 
 
-def _home(text: str) -> Home:
+def _home(text: str) -> tuple[float, float, float]:
     try:
         lat, lon, alt = (float(v) for v in text.split(","))
     except ValueError:
@@ -36,7 +28,7 @@ def _home(text: str) -> Home:
         raise argparse.ArgumentTypeError(
             f"lat in [-90, 90], lon in [-180, 180], alt in [-500, 9000] m; got {text!r}"
         )
-    return Home(lat, lon, alt)
+    return (lat, lon, alt)
 
 
 def _limit_m(text: str) -> float:
@@ -89,6 +81,17 @@ def add_mission_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def describe(item: MissionItem, home: Home) -> str:
     """One item in words, positions in metres from home (x east, y north, z up)."""
+    from autopilot.mission_items import (
+        DO_CHANGE_SPEED,
+        NAV_LAND,
+        NAV_RETURN_TO_LAUNCH,
+        NAV_TAKEOFF,
+        NAV_WAYPOINT,
+        NO_POSITION,
+        local_offset,
+    )
+    from mission.plan_doc import flip_yaw_deg
+
     if item.command == DO_CHANGE_SPEED:
         return f"speed {item.param2:g} m/s" if item.param2 > 0 else "speed unchanged"
     if item.command == NAV_RETURN_TO_LAUNCH:
@@ -106,6 +109,8 @@ def describe(item: MissionItem, home: Home) -> str:
 
 
 def summary(path: Path, doc: MissionDoc) -> list[str]:
+    from mission.formats import FORMAT_NAMES, file_format
+
     home = doc.home
     kind = FORMAT_NAMES[file_format(path, path.read_text())]
     lines = [
@@ -120,17 +125,21 @@ def summary(path: Path, doc: MissionDoc) -> list[str]:
 
 
 def cmd_mission(args: argparse.Namespace) -> int:
+    from autopilot.mission_items import Geofence, Home
+    from mission.formats import FORMAT_NAMES, SUFFIXES, load_mission_file, save_mission_file
+
     fence = Geofence(max_altitude_m=args.max_altitude, max_radius_m=args.max_radius)
     source = args.input if args.action == "convert" else args.file
-    doc = load_mission_file(source, args.home, fence)
-    if args.home is not None and doc.home != args.home:
+    origin = None if args.home is None else Home(*args.home)
+    doc = load_mission_file(source, origin, fence)
+    if origin is not None and doc.home != origin:
         note = f"groundfx mission: note: {source} names its own home; --home unused"
         print(note, file=sys.stderr)
     if args.action == "check":
         print("\n".join(summary(source, doc)))
         print(f"ok: {len(doc.items)} items the vehicle accepts")
         return 0
-    save(doc, args.output)
+    save_mission_file(doc, args.output)
     kind = FORMAT_NAMES[SUFFIXES[args.output.suffix.lower()]]
     print(f"groundfx mission: wrote {args.output} ({kind}, {len(doc.items)} items)")
     return 0
