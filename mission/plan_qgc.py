@@ -29,17 +29,18 @@ from mission.plan_doc import (
 from simbridge.config import ConfigError
 from simbridge.hil import mavlink as mav
 
+# How the file names MissionItem's fields, after the item's place (`mission.items[2]`)
 PLAN_FIELDS = {
-    "command": "command",
-    "frame": "frame",
-    "param1": "params[0]",
-    "param2": "params[1]",
-    "param3": "params[2]",
-    "param4": "params[3]",
-    "x": "params[4]",
-    "y": "params[5]",
-    "z": "params[6]",
-    "autocontinue": "autoContinue",
+    "command": ".command",
+    "frame": ".frame",
+    "param1": ".params[0]",
+    "param2": ".params[1]",
+    "param3": ".params[2]",
+    "param4": ".params[3]",
+    "x": ".params[4]",
+    "y": ".params[5]",
+    "z": ".params[6]",
+    "autocontinue": ".autoContinue",
 }
 # QGroundControl's AltitudeMode: 1 relative to home, 2 above mean sea level, 4 terrain frame
 ALTITUDE_MODES = {mav.MAV_FRAME_GLOBAL_TERRAIN_ALT: 4} | {
