@@ -92,7 +92,7 @@ def _parse_row(fields: list[str], where: str) -> tuple[list[int], list[float]]:
 
 
 def parse_wpl(text: str, where: str) -> ParsedMission:
-    lines = text.splitlines()
+    lines = text.lstrip("\ufeff").splitlines()  # a byte-order mark, as Windows tools write
     if not lines or lines[0].strip() != HEADER:
         first = lines[0][:40] if lines else ""
         raise ConfigError(f"{where}: line 1: expected the header {HEADER!r}, got {first!r}")
