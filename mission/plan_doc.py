@@ -105,10 +105,10 @@ def deg_to_dege7(value_deg: float, where: str) -> int:
     return round(value_deg * DEGE7_PER_DEG)
 
 
-def carries_position(item: MissionItem) -> bool:
+def carries_position(command: int, frame: int) -> bool:
     """Whether x and y are latitude and longitude (degE7) rather than plain numbers: MAVSDK and
     QGroundControl take them raw in the mission frame, MAVProxy for commands without a place."""
-    return item.frame != FRAME_MISSION and item.command not in POSITIONLESS
+    return frame != FRAME_MISSION and command not in POSITIONLESS
 
 
 def number(value: Any, where: str) -> float:

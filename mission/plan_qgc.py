@@ -57,7 +57,7 @@ def _json_number(value: float) -> float | None:
 
 
 def _simple_item(seq: int, item: MissionItem) -> dict[str, Any]:
-    if carries_position(item):
+    if carries_position(item.command, item.frame):
         lat, lon = dege7_to_deg(item.x), dege7_to_deg(item.y)
     else:
         lat, lon = float(item.x), float(item.y)
@@ -70,7 +70,7 @@ def _simple_item(seq: int, item: MissionItem) -> dict[str, Any]:
         "params": [_json_number(p) for p in params],
         "type": "SimpleItem",
     }
-    if carries_position(item) and item.frame in ALTITUDE_MODES:
+    if carries_position(item.command, item.frame) and item.frame in ALTITUDE_MODES:
         entry["AMSLAltAboveTerrain"] = None  # only QGroundControl's terrain planning fills it
         entry["Altitude"] = _json_number(item.z)
         entry["AltitudeMode"] = ALTITUDE_MODES[item.frame]
@@ -128,12 +128,11 @@ def _item(entry: Any, where: str) -> MissionItem:
     auto = entry.get("autoContinue", True)
     if not isinstance(auto, bool):
         raise ConfigError(f"{where}.autoContinue: expected true or false, got {auto!r}")
-    item = MissionItem(command, frame, p[0], p[1], p[2], p[3], 0, 0, p[6], int(auto))
-    if carries_position(item):
+    if carries_position(command, frame):
         x = deg_to_dege7(p[4], f"{where}.params[4] (latitude)")
         y = deg_to_dege7(p[5], f"{where}.params[5] (longitude)")
     else:  # raw numbers, as MAVSDK reads them; null: 0
-        x, y = (0 if math.isnan(v) else round(v) for v in (p[4], p[5]))
+        x, y = (round(v) if math.isfinite(v) else 0 for v in (p[4], p[5]))
     return MissionItem(command, frame, p[0], p[1], p[2], p[3], x, y, p[6], int(auto))
 
 

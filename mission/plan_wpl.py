@@ -52,7 +52,7 @@ def _degrees_text(value_deg: float) -> str:
 
 
 def _row(index: int, current: int, item: MissionItem) -> str:
-    if carries_position(item):
+    if carries_position(item.command, item.frame):
         lat, lon = dege7_to_deg(item.x), dege7_to_deg(item.y)
     else:
         lat, lon = float(item.x), float(item.y)  # raw, as MAVProxy reads them
@@ -125,8 +125,7 @@ def parse_wpl(text: str, where: str) -> ParsedMission:
     home = check_home(Home(home_real[4], home_real[5], home_real[6]), f"{where}: {home_at} (home)")
     items = []
     for at, (_, _, frame, command, auto), (p1, p2, p3, p4, lat, lon, z) in rows[1:]:
-        item = MissionItem(command, frame, p1, p2, p3, p4, 0, 0, z, auto)
-        if carries_position(item):
+        if carries_position(command, frame):
             if not (math.isfinite(lat) and math.isfinite(lon)):
                 raise ConfigError(
                     f"{where}: {at}, columns 9-10 (X, Y): {lat}, {lon}: expected finite degrees"
