@@ -11,7 +11,9 @@ Reading loses: sub-centimetre positions (latitude and longitude snap to the degE
 1.1 cm north and 0.6 cm east here); per-waypoint timeouts (the largest becomes the mission's
 `waypoint_timeout_s`); `name` and comments. A missing `yaw_deg` is NaN, the vehicle's choice.
 Writing keeps only what `yaml_form` keeps and refuses, naming the item and the field, any
-item the format cannot hold; what it writes reads back to exactly those items.
+item the format cannot hold; what it writes reads back to exactly those items. Positions are
+written as the roundest metres (at most 4 decimals) in their degE7 cell: 0.5, not 0.4994,
+and a YAML 0.123 that shares its cell with 0.12 comes back as 0.12.
 """
 
 from __future__ import annotations
