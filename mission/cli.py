@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from mission import commands
+from mission.mission_cli import add_mission_parser
 from simbridge.config import ConfigError
 
 DEFAULT_LOGS = Path("logs")
@@ -192,6 +193,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
     p.set_defaults(func=commands.cmd_fly)
+
+    add_mission_parser(sub)
 
     p = sub.add_parser("learn", help="gather data, train the ground-effect network, plot it")
     learn = p.add_subparsers(dest="action", required=True, metavar="ACTION")
