@@ -152,6 +152,22 @@ def limited_setpoint(
     return (position[0] + dx, position[1] + dy, position[2] + dz)
 
 
+def _skip_where_it_stands(
+    state: CommanderState, params: CommanderParams, position: Vec3
+) -> tuple[CommanderState, tuple[int, ...]]:
+    """Waypoints at the very spot the vehicle stands on when the mission starts are reached
+    already: a QGC WPL file's home row, which MAVProxy uploads as item 0."""
+    skipped: list[int] = []
+    while not state.mission_done:
+        step = state.plan[state.current]
+        radius = step.acceptance_m or params.acceptance_radius_m
+        if step.kind != "waypoint" or math.dist(position, step.position_m) > radius:
+            break
+        skipped.append(state.current)
+        state = _next_item(state, 0.0, position)
+    return state, tuple(skipped)
+
+
 def _climb_first(state: CommanderState) -> bool:
     """A mission starting on the ground with no take-off item climbs to the take-off altitude
     first, as PX4 does."""
@@ -267,12 +283,18 @@ def command(
     if phase in (Phase.DISARMED, Phase.LANDED):
         return Command(state, None, False)
     events: list[str] = []
+    ground_reached: tuple[int, ...] = ()
     if phase == Phase.ARMED:
         wants_air = state.mode in (FlightMode.TAKEOFF, FlightMode.MISSION, FlightMode.OFFBOARD)
         if state.mode == FlightMode.MISSION and state.mission_done:
             wants_air = False
         if not wants_air or time_s - state.since_s < params.spin_up_s:
             return Command(state, None, True)
+        if state.mode == FlightMode.MISSION:
+            state, skipped = _skip_where_it_stands(state, params, position_m)
+            if state.mission_done:
+                return Command(state, None, True, skipped, ("mission complete",))
+            ground_reached = skipped
         state = phase_to(state, Phase.TAKING_OFF, time_s, carrot_m=position_m, target_m=None)
         if state.mode == FlightMode.TAKEOFF or _climb_first(state):
             home = state.home_m or position_m
@@ -280,7 +302,7 @@ def command(
             target = (position_m[0], position_m[1], home[2] + altitude)
             state = go_to(state, target, position_m)
         events.append("taking off")
-    reached: tuple[int, ...] = ()
+    reached: tuple[int, ...] = ground_reached
     if state.phase == Phase.LANDING:
         return _land(state, params, time_s, position_m, height_m, resting_height_m, events)
     if state.mode == FlightMode.OFFBOARD:
@@ -300,7 +322,8 @@ def command(
         state = go_to(state, position_m, position_m)
         events.append("offboard setpoints stopped: holding")
     if state.mode == FlightMode.MISSION and not _climb_first(state):
-        state, reached = _fly_mission(state, params, time_s, position_m)
+        state, flown = _fly_mission(state, params, time_s, position_m)
+        reached += flown
         if state.phase == Phase.LANDING:
             return _land(state, params, time_s, position_m, height_m, resting_height_m, events)
         if state.mission_done:

@@ -9,11 +9,14 @@ local steps (x east, y north, z up, metres) for the commander.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 from simbridge.config import param
 from simbridge.frames import Vec3, geodetic_to_local, local_to_geodetic
-from simbridge.hil import mavlink as mav
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as mav
 
 NAV_WAYPOINT = mav.MAV_CMD_NAV_WAYPOINT
 NAV_TAKEOFF = mav.MAV_CMD_NAV_TAKEOFF

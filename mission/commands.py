@@ -94,7 +94,7 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
     from autopilot.runner import AutopilotConfig, fly_mission
     from autopilot.signing import Signing
     from autopilot.simlink import LinkLost, parse_url
-    from mission.missionfile import load_mission
+    from mission.formats import load_mission_file
     from simbridge.vehicle import load_vehicle
     from simbridge.world import load_world
 
@@ -113,10 +113,10 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
     overrides = _param_overrides(args)
     items: tuple = ()
     if args.mission is not None:
-        local = load_mission(args.mission)
-        items = local.items(Home(*origin))
-        if local.waypoint_timeout_s is not None and "GFX_WP_TIMEOUT" not in overrides:
-            overrides["GFX_WP_TIMEOUT"] = local.waypoint_timeout_s
+        doc = load_mission_file(args.mission, Home(*origin))
+        items = doc.items
+        if doc.waypoint_timeout_s is not None and "GFX_WP_TIMEOUT" not in overrides:
+            overrides["GFX_WP_TIMEOUT"] = doc.waypoint_timeout_s
     params_file = None if str(args.params_file) == "none" else args.params_file
     params = ParamStore(params_file, overrides)
     gcs_urls = () if args.no_gcs else tuple(args.out or DEFAULT_GCS_URLS)

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from mission.missionfile import load_mission
+from mission.formats import load_mission_file
 from simbridge.config import ConfigError
 from simbridge.launch import finish, start_sim
 from simbridge.world import load_world, resolve_world_path
@@ -53,7 +53,7 @@ def fly(
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line."""
     world_obj = load_world(world)  # refuse a bad world or mission before starting anything
-    load_mission(mission_path)
+    load_mission_file(mission_path)
     rho = default_rho(world) if rho is None else rho
     origin = world_obj.origin
     wall0 = time.perf_counter()

@@ -27,7 +27,6 @@ from autopilot.mission_items import (
     speed_item,
 )
 from mission.formats import load_mission_file, save_mission_file
-from mission.missionfile import load_mission
 from mission.plan_doc import MissionDoc, default_home, dege7_to_deg
 from mission.plan_yaml import yaml_form
 from simbridge.config import ConfigError
@@ -80,20 +79,21 @@ def varied_items(rng: random.Random) -> tuple[MissionItem, ...]:
 def test_the_old_yaml_examples_read_as_they_always_did(name):
     path = EXAMPLES / f"{name}.yaml"
     doc = load_mission_file(path)
-    old, takeoff_m = load_mission(path)
+    old = yaml.safe_load(path.read_text())
     assert doc.home == default_home()
     takeoff, *waypoints, land = doc.items
-    assert takeoff.same_as(MissionItem(NAV_TAKEOFF, z=takeoff_m))  # no position: where it stands
-    assert len(waypoints) == len(old.waypoints) and old.land and land.command == NAV_LAND
-    for item, wp in zip(waypoints, old.waypoints, strict=True):
+    assert takeoff.same_as(MissionItem(NAV_TAKEOFF, z=old["takeoff_altitude_m"]))  # where it stands
+    assert len(waypoints) == len(old["waypoints"]) and old["land"] and land.command == NAV_LAND
+    for item, wp in zip(waypoints, old["waypoints"], strict=True):
         assert item.command == NAV_WAYPOINT and item.frame == mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
         offset = local_offset(item, doc.home)
-        assert math.dist(offset, wp.position_m) < 0.006  # the degE7 grid: about 1 cm
-        assert item.z == wp.position_m[2]  # altitudes are exact
-        assert (item.param1, item.param2) == (wp.hold_s, wp.acceptance_radius_m)
+        assert math.dist(offset, wp["position_m"]) < 0.006  # the degE7 grid: about 1 cm
+        assert item.z == wp["position_m"][2]  # altitudes are exact
+        assert item.param1 == wp.get("hold_s", 0.0)
+        assert item.param2 == wp.get("acceptance_radius_m", 0.05)
         assert math.isnan(item.param4)  # no yaw given: the vehicle's choice
     assert (land.x, land.y, land.z) == (waypoints[-1].x, waypoints[-1].y, 0.0)
-    timeouts = [wp.timeout_s for wp in old.waypoints if wp.timeout_s is not None]
+    timeouts = [wp["timeout_s"] for wp in old["waypoints"] if wp.get("timeout_s") is not None]
     assert doc.waypoint_timeout_s == (max(timeouts) if timeouts else None)
 
 
