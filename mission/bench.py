@@ -12,7 +12,7 @@ BENCH_MISSION = Path(__file__).parent / "examples" / "low_hover.yaml"
 
 def bench_sitl(world: str = "default") -> dict[str, Any]:
     """250 Hz control, 1000 Hz physics, ground effect on, the analytic model, lockstep."""
-    summary = fly(BENCH_MISSION, world=world, model="analytic", speedup="max")
+    summary = fly(BENCH_MISSION, world=world, model="analytic", speedup="max", via_gcs=False)
     keys = (
         "rtf",
         "controller_us_p50",

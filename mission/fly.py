@@ -6,10 +6,13 @@ import json
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from autopilot.mission_items import Home
 from mission.formats import load_mission_file
+from mission.gcs_client import GroundStation, GroundStationError
 from simbridge.config import ConfigError
 from simbridge.launch import finish, start_sim
 from simbridge.world import load_world, resolve_world_path
@@ -41,6 +44,24 @@ def autopilot_command(sim_port: int, mission_path: Path, *options: str) -> list[
     ]
 
 
+def gcs_autopilot_command(sim_port: int, gcs_port: int, *options: str) -> list[str]:
+    """An autopilot process that waits for a ground station on udpout:127.0.0.1:`gcs_port`."""
+    return [
+        sys.executable,
+        "-m",
+        "mission.cli",
+        "autopilot",
+        "--sim",
+        f"tcp:127.0.0.1:{sim_port}",
+        "--out",
+        f"udpout:127.0.0.1:{gcs_port}",
+        "--params-file",
+        "none",
+        "--exit-after-landing",
+        *options,
+    ]
+
+
 def fly(
     mission_path: Path,
     world: str = "default",
@@ -50,39 +71,60 @@ def fly(
     start: str | None = None,
     trajectory: Path | None = None,
     network: str | Path | None = None,
+    via_gcs: bool = True,
+    identity: str = "px4",
+    say: Callable[[str], None] = lambda text: None,
 ) -> dict[str, Any]:
-    """Fly; returns the autopilot's summary with the simulator's last line."""
+    """Fly; returns the autopilot's summary with the simulator's last line.
+
+    `via_gcs`: a ground station on pymavlink uploads the mission, arms, starts it and waits
+    for the disarm, as a user's would. Otherwise the autopilot loads the mission and arms by
+    itself at a fixed simulated time, so that the same flight gives the same trajectory.
+    """
     world_obj = load_world(world)  # refuse a bad world or mission before starting anything
-    load_mission_file(mission_path)
+    o = world_obj.origin
+    doc = load_mission_file(mission_path, Home(o.lat_deg, o.lon_deg, o.alt_m))
     rho = default_rho(world) if rho is None else rho
-    origin = world_obj.origin
-    wall0 = time.perf_counter()
-    sim, port = start_sim(resolve_world_path(world), speedup=speedup, start=start)
-    cmd = autopilot_command(
-        port,
-        mission_path,
-        "--model",
-        model,
-        "--rho",
-        str(rho),
-        "--origin",
-        f"{origin.lat_deg},{origin.lon_deg},{origin.alt_m}",
-        "--json",
-    )
+    options = ["--model", model, "--rho", str(rho), "--json", "--identity", identity]
+    options += ["--origin", f"{o.lat_deg},{o.lon_deg},{o.alt_m}"]
     if trajectory is not None:
-        cmd += ["--trajectory", str(trajectory)]
+        options += ["--trajectory", str(trajectory)]
     if network is not None:
-        cmd += ["--network", str(network)]
+        options += ["--network", str(network)]
+    wall0 = time.perf_counter()
+    station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
+    sim, port = start_sim(resolve_world_path(world), speedup=speedup, start=start)
+    gcs: dict[str, Any] = {}
     try:
-        autopilot = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
+        if station is None:
+            cmd = autopilot_command(port, mission_path, *options)
+            autopilot = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
+            out, err, code = autopilot.stdout, autopilot.stderr, autopilot.returncode
+        else:
+            gcs_port = station.conn.port.getsockname()[1]
+            station.on_text = lambda text: say(f"vehicle: {text}")
+            process = subprocess.Popen(
+                gcs_autopilot_command(port, gcs_port, *options),
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            try:
+                gcs = _fly_with(station, doc, process, say)
+                out, err = process.communicate(timeout=120)
+            finally:
+                if process.poll() is None:
+                    process.terminate()
+                    out, err = process.communicate(timeout=30)
+            code = process.returncode
     finally:
         sim_line = finish(sim)
-    lines = autopilot.stdout.strip().splitlines()
-    if autopilot.returncode == 2 or not lines:
+        if station is not None:
+            station.close()
+    lines = out.strip().splitlines()
+    if code == 2 or not lines:
         raise ConfigError(
-            autopilot.stderr.strip().splitlines()[-1]
-            if autopilot.stderr.strip()
-            else "the autopilot printed nothing"
+            err.strip().splitlines()[-1] if err.strip() else "the autopilot printed nothing"
         )
     summary = json.loads(lines[-1])
     summary.update(
@@ -90,8 +132,32 @@ def fly(
         rho=rho,
         simulator=sim_line,
         total_wall_s=time.perf_counter() - wall0,
+        ground_station=gcs,
     )
     return summary
+
+
+def _fly_with(
+    station: GroundStation, doc: Any, process: subprocess.Popen, say: Callable[[str], None]
+) -> dict[str, Any]:
+    """The ground station's part: connect, set the waypoint timeout, upload, arm, start,
+    follow to the disarm."""
+    try:
+        station.connect(timeout_s=20.0)
+        if doc.waypoint_timeout_s is not None:
+            station.set_param("GFX_WP_TIMEOUT", doc.waypoint_timeout_s)
+        say(f"uploading {len(doc.items)} mission items")
+        progress = station.fly_mission(doc.items, timeout_s=1800.0)
+    except GroundStationError as e:
+        if process.poll() is not None:
+            raise ConfigError(f"the autopilot ended: {process.stderr.read().strip()}") from None
+        raise ConfigError(f"ground station: {e}") from None
+    return {
+        "items": len(doc.items),
+        "reached": progress.reached,
+        "mission_state": progress.mission_state,
+        "disarmed": not progress.armed,
+    }
 
 
 def describe(summary: dict[str, Any]) -> str:
