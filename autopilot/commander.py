@@ -179,9 +179,19 @@ def _climb_first(state: CommanderState) -> bool:
     )
 
 
-def start_landing(state: CommanderState, time_s: float, position: Vec3) -> CommanderState:
+def start_landing(
+    state: CommanderState, time_s: float, position: Vec3, over_m: Vec3 | None = None
+) -> CommanderState:
+    """Descend from here; horizontally towards `over_m` (a landing item's or home's position,
+    once within the acceptance radius of it), else straight down."""
+    xy = over_m[:2] if over_m is not None else position[:2]
     return phase_to(
-        state, Phase.LANDING, time_s, landing_from_m=position, down_since_s=None, target_m=None
+        state,
+        Phase.LANDING,
+        time_s,
+        landing_from_m=(xy[0], xy[1], position[2]),
+        down_since_s=None,
+        target_m=None,
     )
 
 
@@ -233,7 +243,7 @@ def _fly_mission(
         if state.reached_s is None:
             break
         if step.kind in ("land", "return"):
-            state = start_landing(state, time_s, position)  # reached at touchdown
+            state = start_landing(state, time_s, position, state.target_m)  # reached at touchdown
             break
         if time_s - state.reached_s < step.hold_s:
             break
@@ -340,7 +350,7 @@ def command(
             state = go_to(state, (home[0], home[1], z), position_m)
         if state.reached_s is not None:
             return _land(
-                start_landing(state, time_s, position_m),
+                start_landing(state, time_s, position_m, state.target_m),
                 params, time_s, position_m, height_m, resting_height_m, events,
             )  # fmt: skip
     elif state.target_m is None:  # HOLD or TAKEOFF without a target: hold here

@@ -85,6 +85,7 @@ class GroundStation:
     last_mission_current: tuple[int, int, int] | None = None
     surface_z: float | None = None  # local z of the surface under the vehicle on the ground
     last_status: tuple[Any, ...] | None = None
+    text_id: int = 0
 
     def __post_init__(self) -> None:
         self.protocol = MissionProtocol(self.identity)
@@ -145,8 +146,16 @@ class GroundStation:
         self.link.send(message, inp.wall_s)
 
     def _text(self, inp: StepInput, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
+        """STATUSTEXT; a text over 50 bytes goes in chunks sharing an id (MAVLink 2)."""
         self.on_event(inp.time_s, text)
-        self.send(mav.MAVLink_statustext_message(severity, text[:50].encode(), 0, 0), inp)
+        data = text.encode()[: 50 * 20]
+        chunks = [data[i : i + 50] for i in range(0, len(data), 50)] or [b""]
+        text_id = 0
+        if len(chunks) > 1:
+            self.text_id = self.text_id % 65535 + 1
+            text_id = self.text_id
+        for seq, chunk in enumerate(chunks):
+            self.send(mav.MAVLink_statustext_message(severity, chunk, text_id, seq), inp)
 
     def _snapshot(self, cmd: CommanderState, inp: StepInput) -> telemetry.Snapshot:
         home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
@@ -209,10 +218,10 @@ class GroundStation:
             self.send(message, inp)
 
     def _send_outcome(self, outcome: Outcome, inp: StepInput) -> None:
+        if outcome.text:  # the reason first, so that it is there when the ack arrives
+            self._text(inp, outcome.text, mav.MAV_SEVERITY_WARNING)
         for reply in outcome.replies:
             self.send(reply, inp)
-        if outcome.text:
-            self._text(inp, outcome.text, mav.MAV_SEVERITY_WARNING)
 
     # --- receiving -------------------------------------------------------------------------
 
@@ -254,14 +263,14 @@ class GroundStation:
         return cmd
 
     def _ack(self, m: Any, command: int, result: int, inp: StepInput, reason: str = "") -> None:
+        if reason:
+            self._text(inp, reason, mav.MAV_SEVERITY_WARNING)
         self.send(
             mav.MAVLink_command_ack_message(
                 command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent()
             ),
             inp,
         )
-        if reason:
-            self._text(inp, reason, mav.MAV_SEVERITY_WARNING)
 
     def _not_ready(self, cmd: CommanderState, inp: StepInput) -> str | None:
         if inp.time_s < 0.2:
@@ -369,9 +378,9 @@ class GroundStation:
             cmd, verdict = requests.set_mode(cmd, mode, inp.time_s, position, params)
             if verdict.accepted and cmd.mode != before:
                 self.on_event(inp.time_s, f"mode {cmd.mode}")
-        self.send(mav.MAVLink_command_ack_message(command, verdict.result, 0, 0, *peer), inp)
         if verdict.reason:
             self._text(inp, verdict.reason, mav.MAV_SEVERITY_WARNING)
+        self.send(mav.MAVLink_command_ack_message(command, verdict.result, 0, 0, *peer), inp)
         return cmd
 
     def _set_current(

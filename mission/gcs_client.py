@@ -44,10 +44,11 @@ class GroundStation:
             url, source_system=GCS_SYSID, source_component=GCS_COMPID, dialect="ardupilotmega"
         )
         if signing_key is not None:
-            self.conn.setup_signing(signing_key, sign_outgoing=True)
+            self.conn.setup_signing(signing_key, sign_outgoing=True, link_id=0)
         self.target = (1, 1)
         self.progress = Progress()
         self.heartbeat_due = 0.0
+        self.partial: dict[int, str] = {}  # STATUSTEXT chunks by id
         self.on_text: Callable[[str], None] = lambda text: None
 
     def close(self) -> None:
@@ -81,8 +82,17 @@ class GroundStation:
             p.mission_state = m.mission_state
         elif kind == "STATUSTEXT":
             text = m.text if isinstance(m.text, str) else m.text.decode(errors="replace")
-            p.texts.append(text)
-            self.on_text(text)
+            if m.id == 0:
+                p.texts.append(text)
+                self.on_text(text)
+            elif m.chunk_seq == 0:
+                self.partial = {m.id: text}
+            elif m.id in self.partial:
+                self.partial[m.id] += text
+            if m.id != 0 and len(text) < 50 and m.id in self.partial:  # the last chunk
+                whole = self.partial.pop(m.id)
+                p.texts.append(whole)
+                self.on_text(whole)
         return m
 
     def wait_for(self, what: str, test: Callable[[Any], bool], timeout_s: float) -> Any:
@@ -153,7 +163,7 @@ class GroundStation:
 
     def upload(self, items: tuple[MissionItem, ...], timeout_s: float = 10.0) -> None:
         """The mission protocol: count, answer each request, the vehicle's ack."""
-        self.conn.mav.mission_count_send(*self.target, len(items), mav.MAV_MISSION_TYPE_MISSION, 0)
+        self.conn.mav.mission_count_send(*self.target, len(items), mav.MAV_MISSION_TYPE_MISSION)
         deadline = time.monotonic() + timeout_s
         while True:
             m = self.wait_for(

@@ -1,0 +1,249 @@
+"""The ground-station endpoint with a real pymavlink ground station over UDP: parameters,
+missions up and down, refusals, hostile input, the link-loss failsafe, the geofence, signing."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import random
+import socket
+import struct
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from autopilot.mission_items import NAV_WAYPOINT, Home, item_at
+from autopilot.mission_protocol import item_from_message, item_message
+from mission.fly import gcs_autopilot_command
+from mission.formats import load_mission_file
+from mission.gcs_client import GroundStation, GroundStationError
+from simbridge.launch import finish, start_sim
+from simbridge.world import load_world
+from tests.helpers import REPO
+
+SQUARE = REPO / "mission" / "examples" / "square.plan"
+WORLD_ORIGIN = load_world("default").origin
+ORIGIN = Home(WORLD_ORIGIN.lat_deg, WORLD_ORIGIN.lon_deg, WORLD_ORIGIN.alt_m)
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def vehicle(
+    *options: str, speedup: str = "max", key: bytes | None = None
+) -> Iterator[tuple[GroundStation, subprocess.Popen[str], int]]:
+    """A simulator and an autopilot sending to a pymavlink ground station; also listening on
+    a udpin port (the third value) for other senders."""
+    station = GroundStation("udpin:127.0.0.1:0", signing_key=key)
+    listen_port = free_udp_port()
+    sim, port = start_sim("default", speedup=speedup)
+    cmd = gcs_autopilot_command(
+        port,
+        station.conn.port.getsockname()[1],
+        "--out",
+        f"udpin:127.0.0.1:{listen_port}",
+        "--json",
+        *options,
+    )
+    autopilot = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        station.connect(timeout_s=20.0)
+        yield station, autopilot, listen_port
+    finally:
+        if autopilot.poll() is None:
+            autopilot.terminate()
+        autopilot.communicate(timeout=30)
+        finish(sim)
+        station.close()
+
+
+def on_the_wire(items: tuple) -> tuple:
+    """The items as MISSION_ITEM_INT carries them (parameters as float32)."""
+    packer = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    return tuple(
+        item_from_message(packer.decode(bytearray(item_message(it, k, False, (1, 1)).pack(packer))))
+        for k, it in enumerate(items)
+    )
+
+
+def summary_of(autopilot: subprocess.Popen[str]) -> dict:
+    out, err = autopilot.communicate(timeout=60)
+    assert out.strip(), err
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def test_parameters_set_read_refuse_and_persist(tmp_path):
+    params = tmp_path / "params.yaml"
+    with vehicle("--params-file", str(params), speedup="1") as (gs, _, _):
+        assert gs.set_param("MIS_TAKEOFF_ALT", 1.5) == 1.5
+        assert gs.set_param("MPC_XY_CRUISE", 1000.0) == 0.5  # out of range: the old value back
+        assert any("outside the allowed range" in t for t in gs.progress.texts)
+        value = gs.get_param("MIS_TAKEOFF_ALT")
+        assert value.param_value == 1.5 and value.param_type == mav.MAV_PARAM_TYPE_REAL32
+        count = value.param_count
+        gs.conn.mav.param_request_list_send(1, 1)
+        names = set()
+        gs.wait_for(
+            "the whole parameter list",
+            lambda m: m.get_type() == "PARAM_VALUE" and names.add(m.param_id) is None
+            and len(names) == count,
+        timeout_s=5.0,
+        )  # fmt: skip
+        assert {"MIS_TAKEOFF_ALT", "NAV_DLL_ACT", "GF_MAX_VER_DIST", "GFX_GE_MODEL"} <= names
+        # MAVLink-FTP is answered with a NAK, so MAVProxy falls back to the list at once
+        gs.conn.mav.file_transfer_protocol_send(0, 1, 1, [0] * 251)
+        nak = gs.wait_for("FTP NAK", lambda m: m.get_type() == "FILE_TRANSFER_PROTOCOL", 3.0)
+        assert nak.payload[3] == 129
+    with vehicle("--params-file", str(params), speedup="1") as (gs, _, _):
+        assert gs.get_param("MIS_TAKEOFF_ALT").param_value == 1.5  # persisted across restarts
+
+
+def test_a_mission_downloads_identical_and_a_bad_one_leaves_it_in_place():
+    doc = load_mission_file(SQUARE)
+    with vehicle(speedup="1") as (gs, _, _):
+        gs.upload(doc.items)
+        back = gs.download()
+        sent = on_the_wire(doc.items)
+        assert len(back) == len(sent)
+        assert all(a.same_as(b) for a, b in zip(back, sent, strict=True))
+        outside = item_at(NAV_WAYPOINT, ORIGIN, (50.0, 0.0, 1.0))  # beyond GF_MAX_HOR_DIST 10 m
+        bad = (*doc.items[:2], outside, *doc.items[2:])
+        with pytest.raises(GroundStationError, match=r"item 2 .*geofence"):
+            gs.upload(bad)
+        assert all(a.same_as(b) for a, b in zip(gs.download(), sent, strict=True))
+        nan_item = item_at(NAV_WAYPOINT, ORIGIN, (0.5, 0.0, float("nan")))
+        with pytest.raises(GroundStationError, match="INVALID_PARAM7"):
+            gs.upload((doc.items[0], nan_item))
+        assert len(gs.download()) == len(doc.items)
+
+
+def test_the_square_mission_flies_to_the_end_through_10000_hostile_frames():
+    doc = load_mission_file(SQUARE)
+    with vehicle() as (gs, autopilot, listen_port):
+        sent = [0]
+        stop = threading.Event()
+        sender = threading.Thread(target=flood, args=(listen_port, sent, stop), daemon=True)
+        gs.upload(doc.items)
+        gs.wait_armable()
+        gs.require(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arming")
+        gs.require(mav.MAV_CMD_MISSION_START, 0, 0, what="mission start")
+        sender.start()
+        gs.wait_for(
+            "disarm after landing", lambda m: gs.progress.was_armed and not gs.progress.armed, 120.0
+        )
+        stop.set()
+        sender.join(timeout=10)
+        summary = summary_of(autopilot)
+    assert sent[0] >= 10_000
+    assert sorted(gs.progress.reached) == list(range(len(doc.items)))
+    assert summary["landed"] and summary["landing_error_m"] < 0.02
+    counters = summary["gcs"]
+    assert counters["dropped"] + counters["invalid"] >= 5_000, counters
+    assert counters["malformed"] > 0 and counters["unknown"] > 0 and counters["wrong_target"] > 0
+
+
+def flood(port: int, sent: list[int], stop: threading.Event) -> None:
+    """Random and mutated frames from a stranger (system 200): garbage, bad CRC, truncated,
+    unknown ids, commands for another system, out-of-range values."""
+    rng = random.Random(7)
+    packer = mav.MAVLink(None, srcSystem=200, srcComponent=1)
+    valid = [
+        mav.MAVLink_command_long_message(42, 1, 400, 0, 0, 21196, 0, 0, 0, 0, 0),  # other system
+        mav.MAVLink_command_long_message(1, 99, 400, 0, 0, 21196, 0, 0, 0, 0, 0),  # other comp
+        mav.MAVLink_param_set_message(1, 1, b"MIS_TAKEOFF_ALT", 1e30, 9),  # out of range
+        mav.MAVLink_param_set_message(1, 1, b"NO_SUCH_PARAM", 1.0, 9),
+        mav.MAVLink_param_request_read_message(1, 1, b"", 30000),
+        mav.MAVLink_mission_set_current_message(1, 1, 9999),
+        mav.MAVLink_command_long_message(1, 1, 178, 0, 1, -5.0, 0, 0, 0, 0, 0),  # bad speed
+        mav.MAVLink_set_position_target_local_ned_message(
+            0, 1, 1, 1, 0, float("nan"), 1e30, 0, 0, 0, 0, 0, 0, 0, 0, 0
+        ),
+    ]
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        while not stop.is_set() and sent[0] < 12_000:
+            frame = bytearray(rng.choice(valid).pack(packer))
+            kind = sent[0] % 5
+            if kind == 0:
+                frame = bytearray(rng.randbytes(rng.randint(1, 300)))
+            elif kind == 1:
+                frame[rng.randrange(10, len(frame))] ^= 0xFF  # bad CRC
+            elif kind == 2:
+                frame = frame[: rng.randrange(1, len(frame))]  # truncated
+            elif kind == 3:  # an id outside the dialect, CRC as if it were known
+                frame[7:10] = struct.pack("<I", 0x00FFF0 + rng.randrange(8))[:3]
+            sock.sendto(bytes(frame), ("127.0.0.1", port))
+            sent[0] += 1
+            if sent[0] % 200 == 0:
+                time.sleep(0.002)  # about 10^5 frames per second at most
+
+
+def test_losing_the_ground_station_in_flight_lands():
+    doc = load_mission_file(SQUARE)
+    options = ("--param", "COM_DL_LOSS_T=1", "--param", "NAV_DLL_ACT=5")
+    with vehicle(*options, speedup="2") as (gs, autopilot, _):
+        gs.upload(doc.items)
+        gs.wait_armable()
+        gs.require(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arming")
+        gs.require(mav.MAV_CMD_MISSION_START, 0, 0, what="mission start")
+        gs.wait_for(
+            "climbing past 0.5 m",
+            lambda m: m.get_type() == "GLOBAL_POSITION_INT" and m.relative_alt > 500,
+            30.0,
+        )
+        # silence: keep listening, stop the heartbeats
+        texts = []
+        deadline = time.monotonic() + 60.0
+        armed = True
+        while armed and time.monotonic() < deadline:
+            m = gs.conn.recv_match(blocking=True, timeout=0.2)
+            if m is not None and m.get_type() == "STATUSTEXT":
+                texts.append(m.text)
+            if m is not None and m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1:
+                armed = bool(m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+        summary = summary_of(autopilot)
+    assert any("failsafe: ground station lost: land" in t for t in texts), texts
+    assert not armed and summary["landed"]
+    assert summary["sim_s"] < 40.0  # landed where it was, not after the whole square
+
+
+def test_signing_refuses_unsigned_and_survives_a_forged_future_timestamp(tmp_path):
+    key_file = tmp_path / "key"
+    key_file.write_text("correct horse battery staple\n")
+    key = __import__("hashlib").sha256(b"correct horse battery staple").digest()
+    with vehicle("--signing-key-file", str(key_file), speedup="1", key=key) as (gs, ap, port):
+        beat = gs.wait_for("a heartbeat", lambda m: m.get_type() == "HEARTBEAT", 5.0)
+        assert beat._signed  # everything the vehicle sends is signed
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+            arm = mav.MAVLink_command_long_message(1, 1, 400, 0, 1, 21196, 0, 0, 0, 0, 0)
+            sock.sendto(arm.pack(unsigned), ("127.0.0.1", port))
+            # a forger with the ground station's ids, the wrong key, a far-future timestamp
+            forger = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+            forger.signing.secret_key = bytes(32)
+            forger.signing.sign_outgoing = True
+            forger.signing.link_id = 0
+            forger.signing.timestamp = gs.conn.mav.signing.timestamp + 10**12
+            ping = mav.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3)
+            sock.sendto(ping.pack(forger), ("127.0.0.1", port))
+        with pytest.raises(GroundStationError):  # no answer at all to the unsigned arm
+            gs.wait_for("COMMAND_ACK", lambda m: m.get_type() == "COMMAND_ACK", 1.0)
+        assert not gs.progress.armed
+        gs.require(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="signed arming")  # not locked out
+        gs.require(mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, what="signed disarm")
+        ap.terminate()
+        summary = summary_of(ap)
+    assert summary["gcs"]["rejected"] >= 2
+    saved = Path(str(key_file) + ".timestamp")
+    assert int(saved.read_text()) > 0  # the timestamp persists beside the key
