@@ -192,7 +192,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--start", metavar="X,Y,Z", help="start position, overriding the world's")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
+    p.add_argument(
+        "--no-gcs",
+        action="store_true",
+        help="no ground station: the autopilot arms and starts by itself (reproducible)",
+    )
+    p.add_argument("--identity", choices=["px4", "ardupilot"], default="px4")
+    p.add_argument("-v", "--verbose", action="store_true", help="print the vehicle's messages")
     p.set_defaults(func=commands.cmd_fly)
+
+    p = sub.add_parser(
+        "sitl",
+        help="simulator and autopilot waiting for ground stations (like make px4_sitl)",
+    )
+    p.add_argument("--world", default="default", help="world YAML or packaged world name")
+    p.add_argument(
+        "--speedup", type=_speedup, default=1.0, help="N times real time or 'max' (default: 1)"
+    )
+    p.add_argument(
+        "-L",
+        "--location",
+        metavar="LAT,LON,ALT,YAW",
+        help="geodetic origin and start heading (degrees from north), as sim_vehicle.py -L",
+    )
+    _model_options(p, rho_default=None, model_default=None)
+    _gcs_options(p)
+    p.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
+    p.set_defaults(func=commands.cmd_sitl)
 
     add_mission_parser(sub)
 

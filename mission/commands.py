@@ -178,9 +178,34 @@ def cmd_fly(args: argparse.Namespace) -> int:
         args.start,
         args.trajectory,
         args.network,
+        via_gcs=not args.no_gcs,
+        identity=args.identity,
+        say=print if args.verbose else (lambda text: None),
     )
     print(json.dumps(summary) if args.json else describe(summary))
     return 0 if summary["landed"] else 1
+
+
+def cmd_sitl(args: argparse.Namespace) -> int:
+    from mission.sitl import parse_location, run_sitl
+
+    location = parse_location(args.location) if args.location else None
+    options = ["--identity", args.identity, "--params-file", str(args.params_file)]
+    options += ["--vehicle", args.vehicle]
+    options += [a for p in args.param for a in ("--param", p)]
+    if args.model is not None:
+        options += ["--model", args.model]
+    if args.rho is not None:
+        options += ["--rho", str(args.rho)]
+    if args.network is not None:
+        options += ["--network", args.network]
+    if args.signing_key_file is not None:
+        options += ["--signing-key-file", str(args.signing_key_file)]
+    gcs_urls = [] if args.no_gcs else list(args.out or DEFAULT_GCS_URLS)
+    if args.no_gcs:
+        options.append("--no-gcs")
+    speedup = "max" if args.speedup is None else f"{args.speedup:g}"
+    return run_sitl(args.world, speedup, options, gcs_urls, location)
 
 
 def cmd_learn(args: argparse.Namespace) -> int:

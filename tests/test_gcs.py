@@ -7,9 +7,11 @@ import contextlib
 import json
 import os
 import random
+import signal
 import socket
 import struct
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -247,3 +249,70 @@ def test_signing_refuses_unsigned_and_survives_a_forged_future_timestamp(tmp_pat
     assert summary["gcs"]["rejected"] >= 2
     saved = Path(str(key_file) + ".timestamp")
     assert int(saved.read_text()) > 0  # the timestamp persists beside the key
+
+
+def test_sitl_takes_off_flies_offboard_and_a_fence_breach_returns_home():
+    station = GroundStation("udpin:127.0.0.1:0")
+    port = station.conn.port.getsockname()[1]
+    sitl = subprocess.Popen(
+        [
+            *(sys.executable, "-m", "mission.cli", "sitl", "--speedup", "4"),
+            *("--params-file", "none", "--out", f"udpout:127.0.0.1:{port}"),
+            *("-L", "47.3977419,8.5455938,488,90"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=REPO,
+    )
+    gs = station
+    try:
+        gs.connect(timeout_s=20.0)
+        home = gs.wait_for("HOME_POSITION", lambda m: m.get_type() == "HOME_POSITION", 10.0)
+        assert abs(home.latitude - 473977419) <= 1 and abs(home.altitude - 488_000) < 50  # -L
+        gs.wait_armable()
+        gs.require(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arming")
+        gs.require(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, float("nan"), 0, 0, 5.0, what="take-off")
+        gs.wait_for(
+            "the take-off altitude (MIS_TAKEOFF_ALT, 1 m, not param 7 under PX4)",
+            lambda m: m.get_type() == "GLOBAL_POSITION_INT" and 950 < m.relative_alt < 1100,
+            30.0,
+        )
+        # offboard: a stream of setpoints first, then the mode (PX4's rule)
+        target_ned = (0.0, 0.6, -1.0)  # 0.6 m east
+        for _ in range(5):
+            send_target(gs, target_ned)
+            gs.receive(0.05)
+        gs.require(mav.MAV_CMD_DO_SET_MODE, 1, 6, 0, what="offboard mode")
+        deadline = time.monotonic() + 30.0
+        east = 0.0
+        while time.monotonic() < deadline and abs(east - 0.6) > 0.05:
+            send_target(gs, target_ned)
+            m = gs.receive(0.05)
+            if m is not None and m.get_type() == "LOCAL_POSITION_NED":
+                east = m.y
+        assert abs(east - 0.6) <= 0.05, east
+        assert gs.set_param("GF_MAX_HOR_DIST", 0.3) == pytest.approx(0.3)  # now outside
+        gs.wait_for(
+            "return mode after the breach",
+            lambda m: m.get_type() == "HEARTBEAT" and m.custom_mode == 0x05040000,
+            10.0,
+        )
+        gs.wait_for("disarm at home", lambda m: gs.progress.was_armed and not gs.progress.armed, 60)
+        position = gs.wait_for("position", lambda m: m.get_type() == "LOCAL_POSITION_NED", 5.0)
+        assert abs(position.x) < 0.03 and abs(position.y) < 0.03  # landed at home
+        assert any("failsafe: geofence" in t for t in gs.progress.texts), gs.progress.texts
+    finally:
+        sitl.send_signal(signal.SIGINT)
+        out, err = sitl.communicate(timeout=30)
+        station.close()
+    assert sitl.returncode == 0, err
+    assert f"udp 127.0.0.1:{port}" in out and "Ctrl-C" in out
+
+
+def send_target(gs: GroundStation, ned: tuple[float, float, float]) -> None:
+    ignore_velocity_acceleration_yaw_rate = 0b101111111000
+    gs.conn.mav.set_position_target_local_ned_send(
+        0, 1, 1, mav.MAV_FRAME_LOCAL_NED, ignore_velocity_acceleration_yaw_rate,
+        *ned, 0, 0, 0, 0, 0, 0, float("nan"), 0,
+    )  # fmt: skip

@@ -1,0 +1,118 @@
+"""`groundfx sitl`: the simulator and the autopilot as two processes, waiting for ground
+stations, like `make px4_sitl` or `sim_vehicle.py`. Ends on Ctrl-C (or SIGTERM), or when
+either process does."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import yaml
+
+from simbridge.config import ConfigError
+from simbridge.launch import finish, start_sim
+from simbridge.world import load_world, resolve_world_path
+
+
+def parse_location(text: str) -> tuple[float, float, float, float]:
+    """`-L LAT,LON,ALT,YAW` as sim_vehicle.py takes it (YAW optional, degrees from north)."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) == 3:
+        values.append(0.0)
+    if len(values) != 4:
+        raise ConfigError(f"-L {text!r}: expected LAT,LON,ALT[,YAW]")
+    lat, lon, alt, yaw = values
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180 and -500 <= alt <= 9000 and -360 <= yaw <= 360):
+        raise ConfigError(
+            f"-L {text!r}: lat in [-90, 90], lon in [-180, 180], alt in [-500, 9000] m, "
+            "yaw in [-360, 360] deg"
+        )
+    return lat, lon, alt, yaw
+
+
+def located_world(world: str, location: tuple[float, float, float, float], folder: Path) -> Path:
+    """The world file with its geodetic origin at `location` and the start heading its yaw."""
+    data = yaml.safe_load(resolve_world_path(world).read_text()) or {}
+    lat, lon, alt, yaw_from_north = location
+    origin = dict(data.get("origin") or {})
+    origin.update(lat_deg=lat, lon_deg=lon, alt_m=alt)
+    data["origin"] = origin
+    start = dict(data.get("start") or {})
+    start["yaw_deg"] = ((90.0 - yaw_from_north) + 180.0) % 360.0 - 180.0  # from east
+    data["start"] = start
+    path = folder / "world.yaml"
+    path.write_text(yaml.safe_dump(data))
+    load_world(path)  # refuse it here, with the message, if it is wrong
+    return path
+
+
+def run_sitl(
+    world: str,
+    speedup: str,
+    autopilot_options: list[str],
+    gcs_urls: list[str],
+    location: tuple[float, float, float, float] | None,
+    say: Callable[[str], None] = print,
+) -> int:
+    with tempfile.TemporaryDirectory(prefix="groundfx-sitl-") as tmp:
+        world_path = (
+            located_world(world, location, Path(tmp)) if location else resolve_world_path(world)
+        )
+        o = load_world(world_path).origin
+        sim, port = start_sim(world_path, speedup=speedup, extra=["--wait"])
+        cmd = [
+            sys.executable, "-m", "mission.cli", "autopilot",
+            "--sim", f"tcp:127.0.0.1:{port}",
+            "--origin", f"{o.lat_deg},{o.lon_deg},{o.alt_m}",
+            *[a for url in gcs_urls for a in ("--out", url)],
+            *autopilot_options,
+        ]  # fmt: skip
+        autopilot = subprocess.Popen(cmd)
+        say(f"groundfx sitl: simulator on tcp:127.0.0.1:{port} ({world_path}, speed {speedup})")
+        say(f"groundfx sitl: vehicle 1 at {o.lat_deg:.7f}, {o.lon_deg:.7f}, {o.alt_m:g} m")
+        for url in gcs_urls:
+            say(f"groundfx sitl: ground stations: {connect_hint(url)}")
+        say("groundfx sitl: Ctrl-C to stop")
+        stop: list[int] = []
+        previous = signal.signal(signal.SIGTERM, lambda signum, frame: stop.append(signum))
+        try:
+            while not stop and autopilot.poll() is None and sim.poll() is None:
+                time.sleep(0.2)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+            if autopilot.poll() is None:
+                autopilot.send_signal(signal.SIGINT)
+                try:
+                    autopilot.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    autopilot.kill()
+            say(finish(sim))
+        ended_by_user = bool(stop) or autopilot.returncode in (0, -signal.SIGINT)
+        return 0 if ended_by_user else (autopilot.returncode or 1)
+
+
+def connect_hint(url: str) -> str:
+    """What a ground station does to reach the vehicle on `url`."""
+    scheme, host, port = url.split(":")
+    if scheme == "udpout":
+        return (
+            f"the vehicle sends to udp {host}:{port} "
+            f"(QGroundControl; mavproxy.py --master udpin:0.0.0.0:{port})"
+        )
+    if scheme in ("udpin", "udp"):
+        peer = "127.0.0.1" if host in ("0.0.0.0", "") else host
+        return (
+            f"send to udp {peer}:{port} "
+            f"(MAVSDK udpout://{peer}:{port}; pymavlink udpout:{peer}:{port})"
+        )
+    return f"connect to tcp {host}:{port} (mavproxy.py --master tcp:{host}:{port})"
