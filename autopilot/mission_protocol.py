@@ -117,7 +117,7 @@ class MissionProtocol:
         if kind == "MISSION_REQUEST_LIST":
             count = len(self.items) if mission_type == MISSION else 0
             return Outcome(
-                (mav.MAVLink_mission_count_message(peer[0], peer[1], count, mission_type, 0),)
+                (mav.MAVLink_mission_count_message(peer[0], peer[1], count, mission_type),)
             )
         if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
             if kind == "MISSION_REQUEST" and self.identity == "px4":
