@@ -366,6 +366,14 @@ class GroundStation:
             params = self.params.commander()
             position = inp.state.position_m
             before = cmd.mode
+            if (
+                mode == FlightMode.OFFBOARD
+                and self.identity == "ardupilot"
+                and inp.time_s - cmd.offboard_s > params.offboard_timeout_s
+            ):
+                # ArduCopter's Guided without a target holds; MAVSDK asks for it before a
+                # take-off, which is itself flown in Guided.
+                mode = FlightMode.TAKEOFF if cmd.mode == FlightMode.TAKEOFF else FlightMode.HOLD
             cmd, verdict = requests.set_mode(cmd, mode, inp.time_s, position, params)
             if verdict.accepted and cmd.mode != before:
                 self.on_event(inp.time_s, f"mode {cmd.mode}")
