@@ -412,10 +412,13 @@ class GroundStation:
 
     def _ftp_nak(self, m: Any, inp: StepInput) -> None:
         """MAVLink-FTP is not offered: a NAK (opcode 129) with error FileNotFound (10), so
-        MAVProxy falls back to the parameter protocol at once."""
+        MAVProxy falls back to the parameter protocol at once. MAVProxy routes a reply by its
+        session and takes it as the answer when its sequence number is the request's + 1."""
         request = bytes(m.payload)
         payload = bytearray(251)
-        payload[0:2] = request[0:2]  # sequence number of the request
+        seq = int.from_bytes(request[0:2], "little") if len(request) > 1 else 0
+        payload[0:2] = ((seq + 1) & 0xFFFF).to_bytes(2, "little")
+        payload[2] = request[2] if len(request) > 2 else 0  # session
         payload[3] = 129  # NAK
         payload[4] = 1  # size: one byte of error code
         payload[5] = request[3] if len(request) > 3 else 0  # opcode being answered
