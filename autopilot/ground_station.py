@@ -16,7 +16,7 @@ from autopilot import requests, telemetry
 from autopilot.commander import AIRBORNE_PHASES, CommanderState, Phase
 from autopilot.controller import FlightState, Setpoint
 from autopilot.gcs_link import GcsLink
-from autopilot.mission_items import Home, MissionItem, plan_steps
+from autopilot.mission_items import Geofence, Home, MissionItem, plan_steps
 from autopilot.mission_protocol import MissionProtocol, Outcome
 from autopilot.modes import FlightMode, decode_mode
 from autopilot.params import (
@@ -160,6 +160,8 @@ class GroundStation:
             armed=cmd.phase not in (Phase.DISARMED, Phase.LANDED),
             ready=self._not_ready(cmd, inp) is None,
             identity=self.identity,
+            fence_on=self.params.geofence() != Geofence(),
+            fence_breached=self.failsafes.fence_breached,
         )
 
     def _mission_current_key(self, cmd: CommanderState) -> tuple[int, int, int]:
