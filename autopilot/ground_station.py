@@ -16,7 +16,7 @@ from autopilot import requests, telemetry
 from autopilot.commander import AIRBORNE_PHASES, CommanderState, Phase
 from autopilot.controller import FlightState, Setpoint
 from autopilot.gcs_link import GcsLink
-from autopilot.mission_items import Home, MissionItem, plan_steps
+from autopilot.mission_items import Geofence, Home, MissionItem, plan_steps
 from autopilot.mission_protocol import MissionProtocol, Outcome
 from autopilot.modes import FlightMode, decode_mode
 from autopilot.params import (
@@ -169,6 +169,8 @@ class GroundStation:
             armed=cmd.phase not in (Phase.DISARMED, Phase.LANDED),
             ready=self._not_ready(cmd, inp) is None,
             identity=self.identity,
+            fence_on=self.params.geofence() != Geofence(),
+            fence_breached=self.failsafes.fence_breached,
         )
 
     def _mission_current_key(self, cmd: CommanderState) -> tuple[int, int, int]:
@@ -375,6 +377,14 @@ class GroundStation:
             params = self.params.commander()
             position = inp.state.position_m
             before = cmd.mode
+            if (
+                mode == FlightMode.OFFBOARD
+                and self.identity == "ardupilot"
+                and inp.time_s - cmd.offboard_s > params.offboard_timeout_s
+            ):
+                # ArduCopter's Guided without a target holds; MAVSDK asks for it before a
+                # take-off, which is itself flown in Guided.
+                mode = FlightMode.TAKEOFF if cmd.mode == FlightMode.TAKEOFF else FlightMode.HOLD
             cmd, verdict = requests.set_mode(cmd, mode, inp.time_s, position, params)
             if verdict.accepted and cmd.mode != before:
                 self.on_event(inp.time_s, f"mode {cmd.mode}")
@@ -413,10 +423,13 @@ class GroundStation:
 
     def _ftp_nak(self, m: Any, inp: StepInput) -> None:
         """MAVLink-FTP is not offered: a NAK (opcode 129) with error FileNotFound (10), so
-        MAVProxy falls back to the parameter protocol at once."""
+        MAVProxy falls back to the parameter protocol at once. MAVProxy routes a reply by its
+        session and takes it as the answer when its sequence number is the request's + 1."""
         request = bytes(m.payload)
         payload = bytearray(251)
-        payload[0:2] = request[0:2]  # sequence number of the request
+        seq = int.from_bytes(request[0:2], "little") if len(request) > 1 else 0
+        payload[0:2] = ((seq + 1) & 0xFFFF).to_bytes(2, "little")
+        payload[2] = request[2] if len(request) > 2 else 0  # session
         payload[3] = 129  # NAK
         payload[4] = 1  # size: one byte of error code
         payload[5] = request[3] if len(request) > 3 else 0  # opcode being answered

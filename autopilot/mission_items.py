@@ -158,9 +158,11 @@ def validate_item(seq: int, item: MissionItem, home: Home, fence: Geofence) -> N
         return
     if item.command == NAV_RETURN_TO_LAUNCH:
         return
-    _finite(seq, item, ("param1", "z"))
+    # A take-off's param1 (pitch) and a landing's (abort altitude) are unused here; MAVSDK
+    # leaves them NaN. A waypoint's (hold) must be a number.
+    _finite(seq, item, ("z",))
     if item.command == NAV_WAYPOINT:
-        _finite(seq, item, ("param2",))
+        _finite(seq, item, ("param1", "param2"))
         if not 0.0 <= item.param1 <= 3600.0:
             raise MissionError(
                 seq, item, "param1", f"hold {item.param1:g} s outside [0, 3600]",

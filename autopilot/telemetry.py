@@ -32,6 +32,7 @@ SENSORS = (
     | mav.MAV_SYS_STATUS_SENSOR_GPS
 )
 PREARM = mav.MAV_SYS_STATUS_PREARM_CHECK
+FENCE = mav.MAV_SYS_STATUS_GEOFENCE
 CAPABILITIES = (
     mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
     | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
@@ -53,6 +54,8 @@ class Snapshot:
     armed: bool
     ready: bool  # pre-arm checks pass
     identity: str
+    fence_on: bool = False  # a geofence limit is set
+    fence_breached: bool = False
 
 
 def _global(s: Snapshot, x: float, y: float) -> tuple[int, int]:
@@ -79,9 +82,12 @@ def heartbeat(s: Snapshot) -> Any:
 
 
 def sys_status(s: Snapshot, drop_rate_percent: float, errors: int) -> Any:
-    health = SENSORS | (PREARM if s.ready else 0)
+    # The geofence bit is healthy unless breached, present or not, as ArduPilot sends it:
+    # MAVProxy announces "fence breach" when it is clear.
+    present = SENSORS | PREARM | (FENCE if s.fence_on else 0)
+    health = SENSORS | (PREARM if s.ready else 0) | (0 if s.fence_breached else FENCE)
     return mav.MAVLink_sys_status_message(
-        SENSORS | PREARM, SENSORS | PREARM, health,
+        present, present, health,
         100, 4100, -1, -1, min(int(drop_rate_percent * 100), 10000), min(errors, 65535),
         0, 0, 0, 0,
     )  # fmt: skip
