@@ -12,7 +12,7 @@ from typing import Any
 
 from autopilot.mission_items import Home
 from mission.formats import load_mission_file
-from mission.gcs_client import GroundStation, GroundStationError
+from mission.gcs_client import GroundStation, GroundStationError, VehicleEnded
 from simbridge.config import ConfigError
 from simbridge.launch import finish, start_sim
 from simbridge.world import load_world, resolve_world_path
@@ -142,15 +142,20 @@ def _fly_with(
 ) -> dict[str, Any]:
     """The ground station's part: connect, set the waypoint timeout, upload, arm, start,
     follow to the disarm."""
+    station.vehicle_alive = lambda: process.poll() is None
     try:
         station.connect(timeout_s=20.0)
         if doc.waypoint_timeout_s is not None:
             station.set_param("GFX_WP_TIMEOUT", doc.waypoint_timeout_s)
         say(f"uploading {len(doc.items)} mission items")
         progress = station.fly_mission(doc.items, timeout_s=1800.0)
+    except VehicleEnded:
+        if process.returncode == 0:  # it landed and ended before its last heartbeat came
+            progress = station.progress
+        else:
+            why = process.stderr.read().strip().splitlines() if process.stderr else []
+            raise ConfigError(f"the autopilot ended: {why[-1] if why else 'no message'}") from None
     except GroundStationError as e:
-        if process.poll() is not None:
-            raise ConfigError(f"the autopilot ended: {process.stderr.read().strip()}") from None
         raise ConfigError(f"ground station: {e}") from None
     return {
         "items": len(doc.items),

@@ -7,7 +7,9 @@ as a real ground station's do (the vehicle's link-loss failsafe listens for them
 
 from __future__ import annotations
 
+import contextlib
 import os
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -26,6 +28,10 @@ FORCE = 21196
 
 class GroundStationError(RuntimeError):
     """The vehicle refused or did not answer; the message says what and why."""
+
+
+class VehicleEnded(GroundStationError):
+    """The vehicle's process (when this station started it) is gone."""
 
 
 @dataclass
@@ -50,6 +56,10 @@ class GroundStation:
         self.heartbeat_due = 0.0
         self.partial: dict[int, str] = {}  # STATUSTEXT chunks by id
         self.on_text: Callable[[str], None] = lambda text: None
+        self.vehicle_alive: Callable[[], bool] = lambda: True
+        # telemetry at 30x real time must not overflow the socket while this process is busy
+        with contextlib.suppress(AttributeError, OSError):
+            self.conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
 
     def close(self) -> None:
         self.conn.close()
@@ -98,6 +108,8 @@ class GroundStation:
     def wait_for(self, what: str, test: Callable[[Any], bool], timeout_s: float) -> Any:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
+            if not self.vehicle_alive():
+                raise VehicleEnded(f"the vehicle's process ended while waiting for {what}")
             m = self.receive(deadline - time.monotonic())
             if m is not None and test(m):
                 return m
