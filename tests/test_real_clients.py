@@ -45,10 +45,9 @@ from tests.helpers import REPO
 
 EXAMPLES = REPO / "mission" / "examples"
 IDENTITIES = ("px4", "ardupilot")
-# Ten times real time. As fast as it can (10-25 times on this machine) both clients fly
-# it too, but they then receive about 1000 telemetry messages per wall second, and on a
-# loaded machine a stalled client's socket overflows: MAVSDK lost the one
-# MISSION_ITEM_REACHED that its is_mission_finished() waits for.
+# Ten times real time: a flight takes 5-7 s wall. As fast as it can (10-25 times here) both
+# clients fly it too, in 3-6 s, but the simulator and the autopilot then take both cores,
+# from the client and from whatever else runs.
 SPEEDUP = "10"
 LANDING_ACCEPTANCE_M = 0.02  # NAV_ACC_RAD, set by each client: where the descent begins
 LANDED_WITHIN_M = 0.03
@@ -127,6 +126,17 @@ async def within(what: str, timeout_s: float, awaitable: Any) -> Any:
         return await asyncio.wait_for(awaitable, timeout_s)
     except TimeoutError:
         raise AssertionError(f"MAVSDK: {what}: nothing within {timeout_s:g} s") from None
+
+
+async def eventually(what: str, timeout_s: float, ask: Callable[[], Awaitable[bool]]) -> None:
+    """Ask until true. MAVSDK hands a callback over before it has taken in every message
+    that came with it: its mission progress can reach the end while is_mission_finished()
+    still says no (about one run in fifteen on a loaded machine)."""
+    end = time.monotonic() + timeout_s
+    while not await within(what, timeout_s, ask()):
+        if time.monotonic() > end:
+            raise AssertionError(f"MAVSDK: {what}: still not so after {timeout_s:g} s")
+        await asyncio.sleep(0.05)
 
 
 async def first(
@@ -342,7 +352,7 @@ async def fly_plugin_mission(client: Client, identity: str) -> dict[str, Any]:
     result = await follow_to_the_ground(
         client, len(items), mission.subscribe_mission_progress(), mission.start_mission()
     )
-    assert await within("mission finished", 5, mission.is_mission_finished())
+    await eventually("mission finished", 5, mission.is_mission_finished)
     return dict(result, items=items)
 
 
@@ -385,7 +395,7 @@ async def fly_raw_plan(client: Client) -> dict[str, Any]:
     result = await follow_to_the_ground(
         client, len(items), raw.subscribe_mission_progress(), raw.start_mission()
     )
-    assert await within("mission finished", 5, raw.is_mission_finished())
+    await eventually("mission finished", 5, raw.is_mission_finished)
     return dict(result, items=items)
 
 
