@@ -19,14 +19,13 @@ from autopilot.gcs_link import GcsLink
 from autopilot.mission_items import Geofence, Home, MissionItem, plan_steps
 from autopilot.mission_protocol import MissionProtocol, Outcome
 from autopilot.modes import FlightMode, decode_mode
+from autopilot.param_protocol import ftp_nak, handle_param
 from autopilot.params import (
     ACTION_HOLD,
     ACTION_LAND,
     ACTION_NAMES,
     ACTION_RETURN,
     ACTION_WARN,
-    ORDER,
-    SPECS,
     ParamStore,
 )
 from simbridge.frames import local_to_geodetic, ned_to_enu
@@ -35,19 +34,7 @@ from simbridge.hil import mavlink as mav
 ACCEPTED, DENIED = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_DENIED
 UNSUPPORTED, FAILED = mav.MAV_RESULT_UNSUPPORTED, mav.MAV_RESULT_FAILED
 FORCE_MAGIC = 21196  # ARM_DISARM param2: arm or disarm whatever the checks say
-REAL32 = mav.MAV_PARAM_TYPE_REAL32
 SIGNING_SAVE_S = 10.0  # wall seconds between saves of the signing timestamp
-ONE_SHOT = {
-    mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: "AUTOPILOT_VERSION",
-    mav.MAVLINK_MSG_ID_HOME_POSITION: "HOME_POSITION",
-    mav.MAVLINK_MSG_ID_HEARTBEAT: "HEARTBEAT",
-    mav.MAVLINK_MSG_ID_SYS_STATUS: "SYS_STATUS",
-    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: "EXTENDED_SYS_STATE",
-    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: "GLOBAL_POSITION_INT",
-    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: "LOCAL_POSITION_NED",
-    mav.MAVLINK_MSG_ID_ATTITUDE: "ATTITUDE",
-    mav.MAVLINK_MSG_ID_MISSION_CURRENT: "MISSION_CURRENT",
-}
 # SET_POSITION_TARGET_LOCAL_NED.type_mask bits: position ignored, velocity ignored
 IGNORE_POSITION = 0b111
 IGNORE_VELOCITY = 0b111000
@@ -260,7 +247,7 @@ class GroundStation:
                     self.streams.set_rate(name, float(m.req_message_rate) if m.start_stop else 0.0)
             return cmd
         if kind == "FILE_TRANSFER_PROTOCOL":
-            self._ftp_nak(m, inp)
+            self.send(ftp_nak(m), inp)
             return cmd
         return cmd
 
@@ -335,7 +322,7 @@ class GroundStation:
         elif c == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
             name = mav.mavlink_map[int(p[0])].msgname if int(p[0]) in mav.mavlink_map else None
             if name is None or (
-                name not in telemetry.DEFAULT_RATES_HZ and name not in ONE_SHOT.values()
+                name not in telemetry.DEFAULT_RATES_HZ and name not in telemetry.ONE_SHOT.values()
             ):
                 verdict = requests.Verdict(UNSUPPORTED)
             else:
@@ -351,7 +338,7 @@ class GroundStation:
                 mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
                 mav.MAV_CMD_GET_HOME_POSITION: mav.MAVLINK_MSG_ID_HOME_POSITION,
             }.get(c, int(p[0]) if math.isfinite(p[0]) else -1)
-            name = ONE_SHOT.get(wanted)
+            name = telemetry.ONE_SHOT.get(wanted)
             if name is None:
                 verdict = requests.Verdict(UNSUPPORTED)
             else:
@@ -421,61 +408,16 @@ class GroundStation:
         setpoint = Setpoint(ned_to_enu(values), velocity_m_s=velocity, yaw_rad=yaw)
         return requests.offboard_setpoint(cmd, setpoint, inp.time_s)
 
-    def _ftp_nak(self, m: Any, inp: StepInput) -> None:
-        """MAVLink-FTP is not offered: a NAK (opcode 129) with error FileNotFound (10), so
-        MAVProxy falls back to the parameter protocol at once. MAVProxy routes a reply by its
-        session and takes it as the answer when its sequence number is the request's + 1."""
-        request = bytes(m.payload)
-        payload = bytearray(251)
-        seq = int.from_bytes(request[0:2], "little") if len(request) > 1 else 0
-        payload[0:2] = ((seq + 1) & 0xFFFF).to_bytes(2, "little")
-        payload[2] = request[2] if len(request) > 2 else 0  # session
-        payload[3] = 129  # NAK
-        payload[4] = 1  # size: one byte of error code
-        payload[5] = request[3] if len(request) > 3 else 0  # opcode being answered
-        payload[12] = 10  # FileNotFound
-        self.send(
-            mav.MAVLink_file_transfer_protocol_message(
-                0, m.get_srcSystem(), m.get_srcComponent(), list(payload)
-            ),
-            inp,
-        )
-
-    # --- parameters ------------------------------------------------------------------------
-
-    def _param_value(self, name: str) -> Any:
-        return mav.MAVLink_param_value_message(
-            name.encode(), self.params.values[name], REAL32, len(ORDER), ORDER.index(name)
-        )
-
     def _param(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
-        kind = m.get_type()
-        if kind == "PARAM_REQUEST_LIST":
-            for name in ORDER:
-                self.send(self._param_value(name), inp)
-        elif kind == "PARAM_REQUEST_READ":
-            name = _param_name(m.param_id)
-            if m.param_index >= 0:
-                if m.param_index >= len(ORDER):
-                    self.link.counters.invalid += 1
-                    return cmd
-                name = ORDER[m.param_index]
-            if name in SPECS:
-                self.send(self._param_value(name), inp)
-            else:
-                self.link.counters.invalid += 1
-        elif kind == "PARAM_SET":
-            name = _param_name(m.param_id)
-            if name not in SPECS:
-                self.link.counters.invalid += 1
-                self._text(inp, f"unknown parameter {name}", mav.MAV_SEVERITY_WARNING)
-                return cmd
-            why = self.params.set(name, float(m.param_value))
-            if why is not None:
-                self._text(inp, why, mav.MAV_SEVERITY_WARNING)
-            else:
-                self.on_event(inp.time_s, f"parameter {name} = {self.params.values[name]:g}")
-            self.send(self._param_value(name), inp)  # the value in force, new or old
+        outcome = handle_param(self.params, m)
+        if outcome.invalid:
+            self.link.counters.invalid += 1
+        if outcome.refused:
+            self._text(inp, outcome.refused, mav.MAV_SEVERITY_WARNING)
+        if outcome.changed:
+            self.on_event(inp.time_s, outcome.changed)
+        for reply in outcome.replies:
+            self.send(reply, inp)
         return cmd
 
     # --- missions --------------------------------------------------------------------------
@@ -546,9 +488,3 @@ class GroundStation:
         position = inp.state.position_m
         cmd, _ = requests.set_mode(cmd, mode, inp.time_s, position, self.params.commander())
         return cmd
-
-
-def _param_name(raw: Any) -> str:
-    if isinstance(raw, bytes):
-        raw = raw.decode("ascii", "replace")
-    return str(raw).split("\x00", 1)[0]

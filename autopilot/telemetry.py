@@ -199,3 +199,17 @@ class Streams:
                 self.due_s[name] = due + interval if time_s - due < interval else time_s + interval
                 out.append(name)
         return out
+
+
+# What REQUEST_MESSAGE may ask for, by message id
+ONE_SHOT = {
+    mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: "AUTOPILOT_VERSION",
+    mav.MAVLINK_MSG_ID_HOME_POSITION: "HOME_POSITION",
+    mav.MAVLINK_MSG_ID_HEARTBEAT: "HEARTBEAT",
+    mav.MAVLINK_MSG_ID_SYS_STATUS: "SYS_STATUS",
+    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: "EXTENDED_SYS_STATE",
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: "GLOBAL_POSITION_INT",
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: "LOCAL_POSITION_NED",
+    mav.MAVLINK_MSG_ID_ATTITUDE: "ATTITUDE",
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: "MISSION_CURRENT",
+}

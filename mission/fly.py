@@ -24,42 +24,28 @@ def default_rho(world_name: str) -> float:
     return ge.rho if ge is not None else 1.0
 
 
+def _autopilot(sim_port: int, *options: str) -> list[str]:
+    """An autopilot process against a local simulator, starting from default parameters."""
+    return [
+        *(sys.executable, "-m", "mission.cli", "autopilot"),
+        *("--sim", f"tcp:127.0.0.1:{sim_port}", "--params-file", "none"),
+        *options,
+    ]
+
+
 def autopilot_command(sim_port: int, mission_path: Path, *options: str) -> list[str]:
     """The command line of an autopilot process flying `mission_path` against a local sim on
     its own, with no ground station (reproducible: arming and take-off at fixed sim times)."""
-    return [
-        sys.executable,
-        "-m",
-        "mission.cli",
-        "autopilot",
-        "--sim",
-        f"tcp:127.0.0.1:{sim_port}",
-        "--mission",
-        str(mission_path),
-        "--auto-start",
-        "--no-gcs",
-        "--params-file",
-        "none",  # a fresh vehicle: defaults and the options given
-        *options,
-    ]
+    return _autopilot(
+        sim_port, "--mission", str(mission_path), "--auto-start", "--no-gcs", *options
+    )
 
 
 def gcs_autopilot_command(sim_port: int, gcs_port: int, *options: str) -> list[str]:
     """An autopilot process that waits for a ground station on udpout:127.0.0.1:`gcs_port`."""
-    return [
-        sys.executable,
-        "-m",
-        "mission.cli",
-        "autopilot",
-        "--sim",
-        f"tcp:127.0.0.1:{sim_port}",
-        "--out",
-        f"udpout:127.0.0.1:{gcs_port}",
-        "--params-file",
-        "none",
-        "--exit-after-landing",
-        *options,
-    ]
+    return _autopilot(
+        sim_port, "--out", f"udpout:127.0.0.1:{gcs_port}", "--exit-after-landing", *options
+    )
 
 
 def fly(
