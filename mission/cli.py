@@ -180,6 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--origin", metavar="LAT,LON,ALT", help="geodetic origin of the local frame")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
+    p.add_argument("--flight-log", type=Path, help="save airborne steps as a gap-diagnosis log")
     p.set_defaults(func=commands.cmd_autopilot)
 
     p = sub.add_parser("fly", help="fly a mission: simulator and autopilot processes in lockstep")
