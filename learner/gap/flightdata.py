@@ -27,6 +27,7 @@ class FlightData:
     segment: np.ndarray  # (N,) index of the airborne spell each row belongs to
     position_m: np.ndarray  # (N, 3) at the row's time
     velocity_m_s: np.ndarray  # (N, 3) mean over the period
+    velocity_at_m_s: np.ndarray  # (N, 3) at the row's time
     rotation: np.ndarray  # (N, 3, 3) body to world, mid-period
     rates_rad_s: np.ndarray  # (N, 3)
     commands_rad_s: np.ndarray  # (N, 4) over the period
@@ -101,6 +102,7 @@ def prepare(log: FlightLog, world: World, vehicle: Vehicle) -> FlightData:
         segment=segment,
         position_m=log.position_m,
         velocity_m_s=v_mid,
+        velocity_at_m_s=log.velocity_m_s,
         rotation=rotation,
         rates_rad_s=log.body_rates_rad_s,
         commands_rad_s=log.rotor_speeds_rad_s,

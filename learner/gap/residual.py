@@ -34,8 +34,16 @@ def smooth_per_segment(x: np.ndarray, segment: np.ndarray, window: int) -> np.nd
     return out
 
 
-def force_gap_rms(residual: np.ndarray, segment: np.ndarray, dt_s: float) -> float:
-    """RMS of the residual's systematic part: averaged over SMOOTH_WINDOW_S per segment."""
+def force_gap_ms(
+    residual: np.ndarray, segment: np.ndarray, dt_s: float, noise_var: float = 0.0
+) -> float:
+    """Mean square of the residual's systematic part (N^2): the residual averaged over
+    SMOOTH_WINDOW_S per segment, less what white noise of per-component variance
+    `noise_var` leaves in such an average."""
     window = max(1, round(SMOOTH_WINDOW_S / dt_s))
     smooth = smooth_per_segment(residual, segment, window)
-    return float(np.sqrt(np.mean(np.sum(smooth**2, axis=1))))
+    return max(float(np.mean(np.sum(smooth**2, axis=1))) - 3.0 * noise_var / window, 0.0)
+
+
+def force_gap_rms(residual: np.ndarray, segment: np.ndarray, dt_s: float) -> float:
+    return float(np.sqrt(force_gap_ms(residual, segment, dt_s)))
