@@ -7,7 +7,7 @@ import math
 import sys
 from pathlib import Path
 
-from mission import commands
+from mission import commands, gap_cli
 from mission.mission_cli import add_mission_parser
 from simbridge.config import ConfigError
 
@@ -265,6 +265,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--vehicle", default="nano")
     g.add_argument("--out", type=Path, default=DEFAULT_LOGS / "ground_effect.png")
     g.set_defaults(func=commands.cmd_plot)
+
+    gap_cli.add_parser(sub)
 
     p = sub.add_parser("demo", help="the demo flight (analytic, neural and no model)")
     p.add_argument("--world", help="world YAML or packaged name (default: rho2; --lift: default)")
