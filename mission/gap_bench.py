@@ -189,7 +189,7 @@ def _world_file(path: Path, case: Case, effects: tuple[dict, ...]) -> Path:
     return path
 
 
-def run_case(case: Case, out: Path) -> dict[str, Any]:
+def run_case(case: Case, out: Path, replay: bool = True) -> dict[str, Any]:
     """Fly (or reuse) the case's flights, diagnose blind, score."""
     from mission.gap_cli import run_diagnosis
 
@@ -211,6 +211,7 @@ def run_case(case: Case, out: Path) -> dict[str, Any]:
         str(nominal),
         folder / "diagnosis",
         folds=len(FIT_SEEDS),
+        replay=replay,
     )
     return score(case, result)
 
