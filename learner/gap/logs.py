@@ -139,6 +139,8 @@ class FlightLog:
 
 
 def _read_table(path: Path) -> dict[str, np.ndarray]:
+    if not path.is_file():
+        raise ConfigError(f"{path}: no such flight log")
     if path.suffix == ".parquet":
         try:
             import pyarrow.parquet as pq
