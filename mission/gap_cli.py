@@ -4,6 +4,7 @@ check on "real" flights flown in worlds holding effects the diagnosis is not tol
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import time
 from pathlib import Path
@@ -85,7 +86,9 @@ def replay_missions(logs: list, nominal: Path, corrected: Path, out: Path) -> di
         if not mission or not Path(mission).exists():
             continue
         a = read_log(fly_log(Path(mission), nominal, out / f"{log.name}-{nominal.stem}.csv"))
-        b = read_log(fly_log(Path(mission), corrected, out / f"{log.name}-corrected.csv"))
+        # keyed by the corrected world's content: a rerun reuses only the same world's flight
+        key = hashlib.sha256(corrected.read_bytes()).hexdigest()[:10]
+        b = read_log(fly_log(Path(mission), corrected, out / f"{log.name}-corrected-{key}.csv"))
         before.append(tracking_difference_m(log, a))
         after.append(tracking_difference_m(log, b))
     if not before:
