@@ -7,6 +7,7 @@ sensors' time is the only clock. The loop is the edge; every decision is a pure 
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -18,6 +19,7 @@ from autopilot.commander import CommanderParams, CommanderState, Mission, Mode, 
 from autopilot.controller import ControllerParams, FlightState, control
 from autopilot.ground_models import GroundEffectInputs, GroundEffectModel
 from autopilot.metrics import COLUMNS, flight_metrics, trajectory_sha256
+from autopilot.recorder import RecordOptions, open_recorder
 from autopilot.simlink import LinkLost, SimLink, Step
 from simbridge.frames import (
     Vec3,
@@ -50,6 +52,7 @@ class AutopilotConfig:
     record_hz: float = 0.0  # > 0: record learning samples at this rate (thesis: 100 Hz)
     stop_after_samples: int | None = None  # end the flight once this many are recorded
     on_sample: Callable[[int], None] | None = None  # told the count of recorded samples
+    record: RecordOptions | None = None  # the flight's rerun recording; None: off
 
 
 @dataclass
@@ -170,6 +173,10 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     samples: list[tuple[float, ...]] = []
     next_sample_s = 0.0
     link = SimLink(config.sim_url, timeout_s=config.link_timeout_s)
+    recorder = open_recorder(
+        config.record, vehicle, config.mission, config.commander.takeoff_altitude_m, MODES
+    )
+    recorder.watch_counters("sim", link.counters)
     wall0 = time.perf_counter()
     try:
         while True:
@@ -216,13 +223,15 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 )
                 rotor_thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in speeds)
                 ge = fixed_point_step(ge, target, rotor_thrust)
-                speeds = control(
-                    state, cmd.setpoint, ge, vehicle, config.controller
-                ).rotor_speeds_rad_s
+                output = control(state, cmd.setpoint, ge, vehicle, config.controller)
+                speeds = output.rotor_speeds_rad_s
                 timings.append(time.perf_counter() - t0)
             else:
-                speeds, ge = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+                speeds, ge, output = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), None
             link.send(t_us, tuple(n / n_max for n in speeds), channels, cmd.armed)
+            recorder.step(
+                t, step, state, height, cmd_state.mode, cmd.armed, cmd.setpoint, ge, speeds, output
+            )
             zd = cmd.setpoint.position_m[2] if cmd.setpoint is not None else math.nan
             p, v = state.position_m, state.velocity_m_s
             rows.append(
@@ -240,6 +249,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         ended = str(lost)
     finally:
         link.close()
+        # an exception on its way out (Ctrl-C, SIGTERM) ended the flight, not `ended`
+        recorder.close(ended if sys.exc_info()[0] is None else "interrupted")
     wall = time.perf_counter() - wall0
     log = np.asarray(rows, dtype=float).reshape(-1, len(COLUMNS))
     last_xy = config.mission.waypoints[-1].position_m[:2] if config.mission.land else None
