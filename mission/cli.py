@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 
 from mission import commands
+from mission.recordings import add_record_options
+from mission.review import add_review_parser
 from simbridge.config import ConfigError
 
 DEFAULT_LOGS = Path("logs")
@@ -109,6 +111,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=commands.cmd_bench)
     b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")
     b.add_argument("--world", default="default")
+    b.add_argument(
+        "--repeat", type=int, default=3, help="flights with recording off and on each (default: 3)"
+    )
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=commands.cmd_bench)
 
@@ -122,6 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--origin", metavar="LAT,LON,ALT", help="geodetic origin of the local frame")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
+    add_record_options(p, world=True)
     p.set_defaults(func=commands.cmd_autopilot)
 
     p = sub.add_parser("fly", help="fly a mission: simulator and autopilot processes in lockstep")
@@ -134,7 +140,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--start", metavar="X,Y,Z", help="start position, overriding the world's")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
+    add_record_options(p)
     p.set_defaults(func=commands.cmd_fly)
+
+    add_review_parser(sub)
 
     p = sub.add_parser("learn", help="gather data, train the ground-effect network, plot it")
     learn = p.add_subparsers(dest="action", required=True, metavar="ACTION")

@@ -72,9 +72,11 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
     from autopilot.commander import CommanderParams
     from autopilot.ground_models import make_model
     from autopilot.metrics import COLUMNS
+    from autopilot.recorder import RecordOptions
     from autopilot.runner import AutopilotConfig, fly_mission
     from autopilot.simlink import LinkLost, parse_url
     from mission.missionfile import load_mission
+    from mission.recordings import record_path
     from simbridge.vehicle import load_vehicle
     from simbridge.world import load_world
 
@@ -97,6 +99,18 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
         origin=origin,
         commander=dataclasses.replace(CommanderParams(), takeoff_altitude_m=takeoff_altitude),
     )
+    recording = record_path(args)
+    if recording is not None:
+        info = {
+            "mission": str(args.mission),
+            "model": args.model,
+            "rho": args.rho,
+            "network": args.network,
+            "world": args.record_world,
+            "sim": args.sim,
+        }
+        world = load_world(args.record_world) if args.record_world else None
+        config = dataclasses.replace(config, record=RecordOptions(recording, world, info))
     signal.signal(signal.SIGTERM, _terminate)
     try:
         flight = fly_mission(config)
@@ -106,7 +120,7 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
     if args.trajectory:
         args.trajectory.parent.mkdir(parents=True, exist_ok=True)
         np.savez(args.trajectory, log=flight.log, columns=np.array(COLUMNS))
-    summary = dict(flight.summary, rho=args.rho)
+    summary = dict(flight.summary, rho=args.rho, recording=str(recording) if recording else None)
     if args.json:
         print(json.dumps(summary), flush=True)
     else:
@@ -135,6 +149,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
         args.start,
         args.trajectory,
         args.network,
+        record=False if args.no_record else (args.record or True),
     )
     print(json.dumps(summary) if args.json else describe(summary))
     return 0 if summary["landed"] else 1
@@ -200,7 +215,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.target == "sitl":
         from mission.bench import bench_sitl
 
-        result = bench_sitl(args.world)
+        result = bench_sitl(args.world, args.repeat)
         print(
             json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
         )

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from mission.missionfile import load_mission
+from mission.recordings import default_recording_path
 from simbridge.config import ConfigError
 from simbridge.launch import finish, start_sim
 from simbridge.world import load_world, resolve_world_path
@@ -45,8 +46,10 @@ def fly(
     start: str | None = None,
     trajectory: Path | None = None,
     network: str | Path | None = None,
+    record: bool | Path = True,
 ) -> dict[str, Any]:
-    """Fly; returns the autopilot's summary with the simulator's last line."""
+    """Fly; returns the autopilot's summary with the simulator's last line. `record`: True
+    records to a new file in the logs folder, a path records there, False not at all."""
     world_obj = load_world(world)  # refuse a bad world or mission before starting anything
     load_mission(mission_path)
     rho = default_rho(world) if rho is None else rho
@@ -68,6 +71,11 @@ def fly(
         cmd += ["--trajectory", str(trajectory)]
     if network is not None:
         cmd += ["--network", str(network)]
+    if record is False:
+        cmd += ["--no-record"]
+    else:
+        path = default_recording_path(mission_path, model) if record is True else record
+        cmd += ["--record", str(path), "--record-world", str(resolve_world_path(world))]
     try:
         autopilot = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
     finally:
@@ -109,5 +117,6 @@ def describe(summary: dict[str, Any]) -> str:
             f"{fmt('rtf', 'x real time')}; controller {fmt('controller_us_p50', 'us')} p50, "
             f"{fmt('controller_us_p99', 'us')} p99",
             f"  {summary['simulator']}",
+            *([f"  recording: {summary['recording']}"] if summary.get("recording") else []),
         ]
     )
