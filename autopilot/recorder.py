@@ -6,9 +6,11 @@ speeds in ESC telemetry), so the autopilot alone writes truth and its own view s
 one process, one file, one recording id. The layout is `autopilot.recording`'s.
 
 The loop must not wait for it. `step` appends one tuple per control step; every
-`flush_every_s` of simulated time the rows become numpy columns and leave with one
-`send_columns` per entity; rerun encodes and writes them on its own thread. A SIGKILL
-loses at most the rows of the last `flush_every_s` (and the footer: the reader copes).
+`flush_every_s` of simulated time (or FLUSH_WALL_S of wall time, if that comes first) the
+rows become numpy columns and leave as a few Arrow record batches (`autopilot.rrbatch`: one
+per set of entities sharing their times, not one call per entity); rerun encodes and writes
+them on its own thread. A SIGKILL loses at most the rows since the last flush (and the
+footer: the reader copes).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import json
 import math
 import threading
+import time
 import uuid
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -62,7 +65,9 @@ from simbridge.world import World
 TRUTH = "DEBUG_VECT"
 TRUTH_NAME = "GE_TRUE"
 ESC = "ESC_TELEMETRY_1_TO_4"
-FLUSH_EVERY_S = 1.0  # simulated seconds between flushes: what a SIGKILL may lose
+FLUSH_EVERY_S = 2.0  # simulated seconds between flushes, at most (what a SIGKILL may lose)
+FLUSH_WALL_S = 0.5  # ... and wall seconds: when the simulator runs slower than 4x real time
+SCENE_PERIOD_S = 0.02  # the 3-D scene at 50 Hz
 TRAIL_SPACING_M = 0.01  # a trail point every centimetre flown
 TRAIL_PERIOD_S = 0.25  # the trail is redrawn this often (simulated seconds)
 TRAIL_SEGMENT_S = 10.0  # the trail's pieces: world/trajectory/0 covers 0-10 s, and so on
@@ -82,7 +87,7 @@ STEP_SERIES = tuple(
 )
 
 GE_COLORS = {"true": (40, 180, 80), "predicted": (255, 140, 0)}
-TRAIL_COLOR = (255, 255, 255)
+TRAIL_RGBA = 0xFFFFFFFF  # white, opaque (rerun packs colours as 0xRRGGBBAA)
 ROTOR_COLORS = ((220, 60, 60), (60, 120, 220), (60, 180, 90), (230, 170, 40))
 
 
@@ -108,6 +113,7 @@ class Recorder(Protocol):
     ) -> None: ...
     def watch_counters(self, link: str, read: Callable[[], Sequence[int]]) -> None: ...
     def close(self, ended: str) -> None: ...
+    def stats(self) -> dict[str, float]: ...
 
 
 @dataclass(frozen=True)
@@ -139,6 +145,9 @@ class NullRecorder:
     def close(self, ended: str) -> None:
         pass
 
+    def stats(self) -> dict[str, float]:
+        return {}
+
 
 def open_recorder(
     options: RecordOptions | None,
@@ -157,23 +166,33 @@ def _s(path: str) -> str:
     return f"{path}:Scalars:scalars"
 
 
-def _column_batches() -> tuple[ColumnBatch, ColumnBatch, ColumnBatch]:
+def _column_batches() -> tuple[ColumnBatch, ColumnBatch, ColumnBatch, ColumnBatch]:
     """What every control step logs; the true ground effect (when GE_TRUE arrives); the
-    actual rotor speeds (when ESC telemetry arrives)."""
-    arrows = rr.Arrows3D.columns(origins=np.zeros((1, 3)), vectors=np.zeros((1, 3)))
+    actual rotor speeds (when ESC telemetry arrives); the 3-D scene (at SCENE_PERIOD_S)."""
+
+    def scalars(width: int) -> Any:
+        return rr.Scalars.columns(scalars=np.zeros((1, width)))
+
     step = ColumnBatch(TIMELINE)
-    pose = rr.Transform3D.columns(translation=np.zeros((1, 3)), quaternion=[[0.0, 0.0, 0.0, 1.0]])
-    step.add(DRONE, pose)
     for path in STEP_SERIES:
-        step.add(path, rr.Scalars.columns(scalars=np.zeros((1, len(SERIES[path])))))
-    step.add(GE_PREDICTED_ARROW, arrows)
+        step.add(path, scalars(len(SERIES[path])))
     truth = ColumnBatch(TIMELINE)
     for axis in "xyz":
-        truth.add(f"plots/ground_effect/{axis}/true", rr.Scalars.columns(scalars=np.zeros((1, 1))))
-    truth.add(GE_TRUE_ARROW, arrows)
+        truth.add(f"plots/ground_effect/{axis}/true", scalars(1))
     esc = ColumnBatch(TIMELINE)
-    esc.add("plots/rotors/actual", rr.Scalars.columns(scalars=np.zeros((1, 4))))
-    return step, truth, esc
+    esc.add("plots/rotors/actual", scalars(4))
+    scene = ColumnBatch(TIMELINE)
+    pose = rr.Transform3D.columns(translation=np.zeros((1, 3)), quaternion=[[0.0, 0.0, 0.0, 1.0]])
+    scene.add(DRONE, pose)
+    for path in (GE_PREDICTED_ARROW, GE_TRUE_ARROW):
+        scene.add(path, rr.Arrows3D.columns(origins=np.zeros((1, 3)), vectors=np.zeros((1, 3))))
+    return step, truth, esc, scene
+
+
+def _firsts(t_s: np.ndarray, last_s: float, period_s: float) -> np.ndarray:
+    """The rows that open a new period (multiples of `period_s`) after time `last_s`."""
+    before = np.concatenate(([last_s], t_s[:-1]))
+    return np.floor(t_s / period_s) > np.floor(before / period_s)
 
 
 def _duration(t_s: np.ndarray) -> rr.TimeColumn:
@@ -206,25 +225,36 @@ class FlightRecorder:
         rec.set_log_time_enabled(False)  # sim_time only: the same flight, the same data
         rec.send_recording_name(self.path.stem)
         self._rec = rec
-        self._step_batch, self._truth_batch, self._esc_batch = _column_batches()
+        batches = _column_batches()
+        self._step_batch, self._truth_batch, self._esc_batch, self._scene_batch = batches
+        self._scene_t = -math.inf  # the last step the scene has seen
+        self._truth_held = np.zeros(3)  # the true ground effect last received
         self._rows: list[tuple[float, ...]] = []
         self._events: list[tuple[float, str, str]] = []
         self._learner: list[tuple[float, float, float]] = []
         self._learner_lock = threading.Lock()  # the online learner reports from its thread
-        self._counters: dict[str, Callable[[], Sequence[int]]] = {}
+        self._counters: dict[str, tuple[Callable[[], Sequence[int]], ColumnBatch]] = {}
         self._segment = 0  # the trail's segment in progress
         self._segment_points = np.zeros((0, 3))  # its points so far
         self._segment_drawn = 0  # how many of them its last drawing had
+        self._trail_batches: dict[str, ColumnBatch] = {}
         self._trail_length_m = 0.0
         self._trail_last: np.ndarray | None = None
-        self._next_trail_s = 0.0
+        self._trail_t = -math.inf  # the last step the trail has seen
         self._next_flush_s = -math.inf
+        self._flush_deadline = -math.inf
         self._last_t = 0.0
         self._mode: str | None = None
         self._mode_index = -1.0
         self._armed = False
         self._started = False
         self._closed = False
+        # What recording costs: time in step() (flushes included) on the loop's thread, and
+        # the CPU time of rerun's threads (encoding, writing) beside it.
+        self._step_s = 0.0
+        self._steps = 0
+        self._cpu0 = time.process_time() - time.thread_time()
+        self._background_s = 0.0
         self._log_static()
 
     # -- the loop's calls -------------------------------------------------------------------
@@ -243,6 +273,7 @@ class FlightRecorder:
         output: ControlOutput | None,
     ) -> None:
         """One control step: what the autopilot saw, decided and sent, and the truth."""
+        t0 = time.perf_counter()
         if not self._started:
             self._start(t_s, state.position_m)
         if mode != self._mode:
@@ -280,8 +311,10 @@ class FlightRecorder:
             )
         )
         self._last_t = t_s
-        if t_s >= self._next_flush_s:
+        if t_s >= self._next_flush_s or t0 >= self._flush_deadline:
             self.flush()
+        self._steps += 1
+        self._step_s += time.perf_counter() - t0
 
     def event(self, text: str, level: str = "INFO", t_s: float | None = None) -> None:
         """A line in the event log (failsafes, link events, ...); level as rerun's TextLog:
@@ -301,8 +334,11 @@ class FlightRecorder:
 
     def watch_counters(self, link: str, read: Callable[[], Sequence[int]]) -> None:
         """Record `read()` = (received, dropped, rejected) of a MAVLink link at every flush."""
-        self._counters[link] = read
-        self._rec.log(f"{MAVLINK}/{link}", rr.SeriesLines(names=list(COUNTERS)), static=True)
+        path = f"{MAVLINK}/{link}"
+        batch = ColumnBatch(TIMELINE)
+        batch.add(path, rr.Scalars.columns(scalars=np.zeros((1, len(COUNTERS)))))
+        self._counters[link] = (read, batch)
+        self._rec.log(path, rr.SeriesLines(names=list(COUNTERS)), static=True)
 
     def close(self, ended: str) -> None:
         """Flush everything, note how the flight ended, and finish the file (with its footer)."""
@@ -314,6 +350,16 @@ class FlightRecorder:
         self.flush()
         self._rec.flush()
         self._rec.disconnect()  # closes the file sink: writes the footer
+        self._background_s = time.process_time() - time.thread_time() - self._cpu0
+
+    def stats(self) -> dict[str, float]:
+        """Recording's cost per control step, in microseconds: in the loop (`step`, flushes
+        included) and on rerun's threads (CPU time; they run beside the loop)."""
+        steps = max(self._steps, 1)
+        return {
+            "recorder_us_per_step": self._step_s / steps * 1e6,
+            "recorder_background_us_per_step": self._background_s / steps * 1e6,
+        }
 
     # -- flushing ---------------------------------------------------------------------------
 
@@ -337,10 +383,12 @@ class FlightRecorder:
                 keep = ~np.isnan(a[:, col])
                 if keep.any():
                     self._scalars(path, a[keep, 0], a[keep, col])
-        for link, read in self._counters.items():
+        now_ns = np.array([round(self._last_t * 1e9)], dtype=np.int64)
+        for link, (read, batch) in self._counters.items():
             counts = np.asarray([read()], dtype=float)
-            self._scalars(f"{MAVLINK}/{link}", np.array([self._last_t]), counts)
+            batch.send(self._rec, now_ns, {_s(f"{MAVLINK}/{link}"): counts})
         self._next_flush_s = self._last_t + self._every_s
+        self._flush_deadline = time.perf_counter() + FLUSH_WALL_S
 
     def _send(self, path: str, t_s: np.ndarray, columns: Any) -> None:
         rr.send_columns(path, indexes=[_duration(t_s)], columns=columns, recording=self._rec)
@@ -358,8 +406,6 @@ class FlightRecorder:
         roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
         pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
         values = {
-            f"{DRONE}:Transform3D:translation": p,
-            f"{DRONE}:Transform3D:quaternion": q[:, [1, 2, 3, 0]],  # rerun's order: x y z w
             _s("plots/position"): p,
             _s("plots/velocity"): v,
             _s("plots/setpoint"): sp,
@@ -370,27 +416,55 @@ class FlightRecorder:
             _s("plots/errors/velocity"): spv - v,
             _s("plots/errors/attitude"): a[:, DES : DES + 2] - np.column_stack((roll, pitch)),
             _s("plots/rotors/commanded"): a[:, N : N + 4],
-            f"{GE_PREDICTED_ARROW}:Arrows3D:origins": p,
-            f"{GE_PREDICTED_ARROW}:Arrows3D:vectors": ge * GE_ARROW_M_PER_N,
         }
         for i, axis in enumerate("xyz"):
             values[_s(f"plots/ground_effect/{axis}/predicted")] = ge[:, i]
         self._step_batch.send(self._rec, time_ns, values)
         has_truth = ~np.isnan(true_ge[:, 0])
         if has_truth.any():
-            true_ge = true_ge[has_truth]
             values = {
-                f"{GE_TRUE_ARROW}:Arrows3D:origins": p[has_truth],
-                f"{GE_TRUE_ARROW}:Arrows3D:vectors": true_ge * GE_ARROW_M_PER_N,
+                _s(f"plots/ground_effect/{axis}/true"): true_ge[has_truth, i]
+                for i, axis in enumerate("xyz")
             }
-            for i, axis in enumerate("xyz"):
-                values[_s(f"plots/ground_effect/{axis}/true")] = true_ge[:, i]
             self._truth_batch.send(self._rec, time_ns[has_truth], values)
         has_esc = ~np.isnan(a[:, ACT])
         if has_esc.any():
             actual = a[has_esc, ACT : ACT + 4] / RAD_S_TO_RPM
             self._esc_batch.send(self._rec, time_ns[has_esc], {_s("plots/rotors/actual"): actual})
+        self._send_scene(t, time_ns, p, q, ge, true_ge)
         self._send_trail(t, p)
+
+    def _send_scene(
+        self,
+        t: np.ndarray,
+        time_ns: np.ndarray,
+        p: np.ndarray,
+        q: np.ndarray,
+        ge: np.ndarray,
+        true_ge: np.ndarray,
+    ) -> None:
+        """The drone's pose and the ground-effect arrows at SCENE_PERIOD_S (the plots keep
+        every step): a 3-D view needs no more, and it is a third of the data."""
+        keep = _firsts(t, self._scene_t, SCENE_PERIOD_S)
+        # the truth last received (it comes every step unless the world slows it down)
+        seen = np.flatnonzero(~np.isnan(true_ge[:, 0]))
+        truth = np.tile(self._truth_held, (len(t), 1))
+        if len(seen):
+            held = np.searchsorted(seen, np.arange(len(t)), side="right") - 1
+            truth[held >= 0] = true_ge[seen[held[held >= 0]]]
+            self._truth_held = true_ge[seen[-1]]
+        self._scene_t = t[-1]
+        if not keep.any():
+            return
+        values = {
+            f"{DRONE}:Transform3D:translation": p[keep],
+            f"{DRONE}:Transform3D:quaternion": q[keep][:, [1, 2, 3, 0]],  # rerun's: x y z w
+            f"{GE_PREDICTED_ARROW}:Arrows3D:origins": p[keep],
+            f"{GE_PREDICTED_ARROW}:Arrows3D:vectors": ge[keep] * GE_ARROW_M_PER_N,
+            f"{GE_TRUE_ARROW}:Arrows3D:origins": p[keep],
+            f"{GE_TRUE_ARROW}:Arrows3D:vectors": truth[keep] * GE_ARROW_M_PER_N,
+        }
+        self._scene_batch.send(self._rec, time_ns[keep], values)
 
     def _send_trail(self, t: np.ndarray, p: np.ndarray) -> None:
         """The flown path: a point every TRAIL_SPACING_M flown, drawn every TRAIL_PERIOD_S up
@@ -408,9 +482,7 @@ class FlightRecorder:
         self._trail_length_m, self._trail_last = float(flown[-1]), p[-1]
         drawn: dict[int, tuple[list[float], list[np.ndarray]]] = {}
         used = 0
-        for i in np.flatnonzero(t >= self._next_trail_s):
-            if t[i] < self._next_trail_s:
-                continue
+        for i in np.flatnonzero(_firsts(t, self._trail_t, TRAIL_PERIOD_S)):
             upto = int(np.searchsorted(kept_t, t[i], side="right"))
             points = np.vstack((self._segment_points, kept_p[used:upto]))
             used = upto
@@ -422,14 +494,20 @@ class FlightRecorder:
             times, strips = drawn.setdefault(segment, ([], []))
             times.append(t[i])
             strips.append(np.vstack((points, p[i : i + 1])))
-            self._next_trail_s = t[i] + TRAIL_PERIOD_S
+        self._trail_t = t[-1]
         self._segment_points = np.vstack((self._segment_points, kept_p[used:]))
         for segment, (times, strips) in drawn.items():
-            self._send(
-                f"{TRAJECTORY}/{segment}",
-                np.asarray(times),
-                rr.LineStrips3D.columns(strips=strips, colors=[TRAIL_COLOR] * len(strips)),
-            )
+            path = f"{TRAJECTORY}/{segment}"
+            if path not in self._trail_batches:
+                batch = ColumnBatch(TIMELINE)
+                batch.add(path, rr.LineStrips3D.columns(strips=[np.zeros((2, 3))], colors=[0]))
+                self._trail_batches[path] = batch
+            values = {
+                f"{path}:LineStrips3D:strips": strips,
+                f"{path}:LineStrips3D:colors": np.full(len(strips), TRAIL_RGBA, dtype=np.uint32),
+            }
+            time_ns = np.rint(np.asarray(times) * 1e9).astype(np.int64)
+            self._trail_batches[path].send(self._rec, time_ns, values)
 
     # -- the static part and the start ------------------------------------------------------
 

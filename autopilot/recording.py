@@ -35,13 +35,13 @@ GROUND = "world/ground"  # a thin slab whose top is z = 0
 OBSTACLES = "world/obstacles"  # boxes of the world file (only when it has any)
 WAYPOINTS = "world/mission/waypoints"  # points with labels, logged when the flight starts
 MISSION_PATH = "world/mission/path"  # start, take-off point, waypoints, landing point
-DRONE = "world/drone"  # Transform3D every control step (the pose; body frame FLU)
+DRONE = "world/drone"  # Transform3D at 50 Hz (the pose; body frame FLU); plots: every step
 DRONE_BODY = "world/drone/body"  # the body box, in the body frame
 DRONE_ARMS = "world/drone/arms"  # centre to each rotor
 DRONE_ROTORS = "world/drone/rotors"  # rotor discs of the ground-effect model's radius
 TRAJECTORY = "world/trajectory"  # the path flown: segments <k> of 10 s, each redrawn as it grows
-GE_TRUE_ARROW = "world/ground_effect/true"  # the simulator's true force at the drone
-GE_PREDICTED_ARROW = "world/ground_effect/predicted"  # the controller's estimate
+GE_TRUE_ARROW = "world/ground_effect/true"  # the simulator's true force at the drone, 50 Hz
+GE_PREDICTED_ARROW = "world/ground_effect/predicted"  # the controller's estimate, 50 Hz
 
 # Time series (Scalars): entity path -> names of its series, in order.
 SERIES: dict[str, tuple[str, ...]] = {

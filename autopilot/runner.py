@@ -272,5 +272,6 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             controller_us_p99=float(np.percentile(us, 99)),
         )
     summary.update(model=config.model.name, malformed=link.malformed, unknown=link.unknown)
+    summary.update(recorder.stats())
     data = np.asarray(samples, dtype=float) if samples else None
     return Flight(log=log, summary=summary, ended=ended, samples=data)

@@ -50,6 +50,10 @@ def bench_sitl(world: str = "default", repeat: int = 3) -> dict[str, Any]:
         "recording_rtf_ratio": rtf_on / rtf_off,
         "recording_us_per_step": (wall_per_step_on - wall_per_step_off) * 1e6,
         "recording_bytes": int(statistics.median(s["recording_bytes"] for s in on)),
+        "recorder_us_per_step": statistics.median(s["recorder_us_per_step"] for s in on),
+        "recorder_background_us_per_step": statistics.median(
+            s["recorder_background_us_per_step"] for s in on
+        ),
         "rtf_runs_off": [s["rtf"] for s in off],
         "rtf_runs_on": [s["rtf"] for s in on],
     }
