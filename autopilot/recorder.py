@@ -7,10 +7,10 @@ one process, one file, one recording id. The layout is `autopilot.recording`'s.
 
 The loop must not wait for it. `step` appends one tuple per control step; every
 `flush_every_s` of simulated time (or FLUSH_WALL_S of wall time, if that comes first) the
-rows become numpy columns and leave as a few Arrow record batches (`autopilot.rrbatch`: one
-per set of entities sharing their times, not one call per entity); rerun encodes and writes
-them on its own thread. A SIGKILL loses at most the rows since the last flush (and the
-footer: the reader copes).
+rows become numpy columns and leave as a few Arrow record batches (`autopilot.recorder_rows`,
+`autopilot.rrbatch`: one per set of entities sharing their times, not one call per entity);
+rerun encodes and writes them on its own thread. A SIGKILL loses at most the rows since the
+last flush (and the footer: the reader copes).
 """
 
 from __future__ import annotations
@@ -32,10 +32,10 @@ from autopilot.blueprint import default_blueprint
 from autopilot.commander import Mission
 from autopilot.controller import ControlOutput, FlightState, Setpoint
 from autopilot.navigator import Waypoint
+from autopilot.recorder_rows import RowSender, scalars_key
 from autopilot.recording import (
     APPLICATION_ID,
     COUNTERS,
-    DRONE,
     EVENTS,
     GE_ARROW_M_PER_N,
     GE_PREDICTED_ARROW,
@@ -45,7 +45,6 @@ from autopilot.recording import (
     META,
     SERIES,
     TIMELINE,
-    TRAJECTORY,
 )
 from autopilot.rrbatch import ColumnBatch
 from autopilot.scene import (
@@ -57,7 +56,6 @@ from autopilot.scene import (
 )
 from autopilot.simlink import Step
 from simbridge.frames import Vec3
-from simbridge.hil import RAD_S_TO_RPM
 from simbridge.rotors import Quad
 from simbridge.vehicle import Vehicle
 from simbridge.world import World
@@ -67,27 +65,11 @@ TRUTH_NAME = "GE_TRUE"
 ESC = "ESC_TELEMETRY_1_TO_4"
 FLUSH_EVERY_S = 2.0  # simulated seconds between flushes, at most (what a SIGKILL may lose)
 FLUSH_WALL_S = 0.5  # ... and wall seconds: when the simulator runs slower than 4x real time
-SCENE_PERIOD_S = 0.02  # the 3-D scene at 50 Hz
-TRAIL_SPACING_M = 0.01  # a trail point every centimetre flown
-TRAIL_PERIOD_S = 0.25  # the trail is redrawn this often (simulated seconds)
-TRAIL_SEGMENT_S = 10.0  # the trail's pieces: world/trajectory/0 covers 0-10 s, and so on
 NAN3 = (math.nan,) * 3
 NAN4 = (math.nan,) * 4
 NAN2 = (math.nan,) * 2
 
-# Columns of a step row (one tuple per control step).
-T, P, V, Q, SP, SPV, H, MODE, GE, N, TRUE, ACT, DES = (
-    0, 1, 4, 7, 11, 14, 17, 18, 19, 22, 26, 29, 33,
-)  # fmt: skip
-ROW_WIDTH = 35
-STEP_SERIES = tuple(
-    p
-    for p in SERIES
-    if not p.startswith("plots/learner/") and not p.endswith("/true") and p != "plots/rotors/actual"
-)
-
 GE_COLORS = {"true": (40, 180, 80), "predicted": (255, 140, 0)}
-TRAIL_RGBA = 0xFFFFFFFF  # white, opaque (rerun packs colours as 0xRRGGBBAA)
 ROTOR_COLORS = ((220, 60, 60), (60, 120, 220), (60, 180, 90), (230, 170, 40))
 
 
@@ -112,6 +94,7 @@ class Recorder(Protocol):
         self, t_s: float, loss: float | None = None, version: int | None = None
     ) -> None: ...
     def watch_counters(self, link: str, read: Callable[[], Sequence[int]]) -> None: ...
+    def mission(self, waypoints: Sequence[Waypoint], start_m: Vec3, t_s: float) -> None: ...
     def close(self, ended: str) -> None: ...
     def stats(self) -> dict[str, float]: ...
 
@@ -142,6 +125,9 @@ class NullRecorder:
     def watch_counters(self, link: str, read: Callable[[], Sequence[int]]) -> None:
         pass
 
+    def mission(self, waypoints: Sequence[Waypoint], start_m: Vec3, t_s: float) -> None:
+        pass
+
     def close(self, ended: str) -> None:
         pass
 
@@ -159,40 +145,6 @@ def open_recorder(
     if options is None:
         return NullRecorder()
     return FlightRecorder(options, vehicle, mission, takeoff_altitude_m, modes)
-
-
-def _s(path: str) -> str:
-    """The key of a time series' values in a ColumnBatch."""
-    return f"{path}:Scalars:scalars"
-
-
-def _column_batches() -> tuple[ColumnBatch, ColumnBatch, ColumnBatch, ColumnBatch]:
-    """What every control step logs; the true ground effect (when GE_TRUE arrives); the
-    actual rotor speeds (when ESC telemetry arrives); the 3-D scene (at SCENE_PERIOD_S)."""
-
-    def scalars(width: int) -> Any:
-        return rr.Scalars.columns(scalars=np.zeros((1, width)))
-
-    step = ColumnBatch(TIMELINE)
-    for path in STEP_SERIES:
-        step.add(path, scalars(len(SERIES[path])))
-    truth = ColumnBatch(TIMELINE)
-    for axis in "xyz":
-        truth.add(f"plots/ground_effect/{axis}/true", scalars(1))
-    esc = ColumnBatch(TIMELINE)
-    esc.add("plots/rotors/actual", scalars(4))
-    scene = ColumnBatch(TIMELINE)
-    pose = rr.Transform3D.columns(translation=np.zeros((1, 3)), quaternion=[[0.0, 0.0, 0.0, 1.0]])
-    scene.add(DRONE, pose)
-    for path in (GE_PREDICTED_ARROW, GE_TRUE_ARROW):
-        scene.add(path, rr.Arrows3D.columns(origins=np.zeros((1, 3)), vectors=np.zeros((1, 3))))
-    return step, truth, esc, scene
-
-
-def _firsts(t_s: np.ndarray, last_s: float, period_s: float) -> np.ndarray:
-    """The rows that open a new period (multiples of `period_s`) after time `last_s`."""
-    before = np.concatenate(([last_s], t_s[:-1]))
-    return np.floor(t_s / period_s) > np.floor(before / period_s)
 
 
 def _duration(t_s: np.ndarray) -> rr.TimeColumn:
@@ -225,22 +177,12 @@ class FlightRecorder:
         rec.set_log_time_enabled(False)  # sim_time only: the same flight, the same data
         rec.send_recording_name(self.path.stem)
         self._rec = rec
-        batches = _column_batches()
-        self._step_batch, self._truth_batch, self._esc_batch, self._scene_batch = batches
-        self._scene_t = -math.inf  # the last step the scene has seen
-        self._truth_held = np.zeros(3)  # the true ground effect last received
+        self._sender = RowSender(rec)
         self._rows: list[tuple[float, ...]] = []
         self._events: list[tuple[float, str, str]] = []
         self._learner: list[tuple[float, float, float]] = []
         self._learner_lock = threading.Lock()  # the online learner reports from its thread
         self._counters: dict[str, tuple[Callable[[], Sequence[int]], ColumnBatch]] = {}
-        self._segment = 0  # the trail's segment in progress
-        self._segment_points = np.zeros((0, 3))  # its points so far
-        self._segment_drawn = 0  # how many of them its last drawing had
-        self._trail_batches: dict[str, ColumnBatch] = {}
-        self._trail_length_m = 0.0
-        self._trail_last: np.ndarray | None = None
-        self._trail_t = -math.inf  # the last step the trail has seen
         self._next_flush_s = -math.inf
         self._flush_deadline = -math.inf
         self._last_t = 0.0
@@ -293,7 +235,7 @@ class FlightRecorder:
         else:
             sp = spv = NAN3
         desired = (output.desired_roll_rad, output.desired_pitch_rad) if output else NAN2
-        self._rows.append(
+        self._rows.append(  # in the order of recorder_rows.Row
             (
                 t_s,
                 *state.position_m,
@@ -367,7 +309,7 @@ class FlightRecorder:
         """Send the buffered rows, events, learner reports and counters to rerun."""
         rows, self._rows = self._rows, []
         if rows:
-            self._send_rows(np.asarray(rows, dtype=float))
+            self._sender.send(np.asarray(rows, dtype=float))
         if self._events:
             events, self._events = self._events, []
             self._send(
@@ -386,7 +328,7 @@ class FlightRecorder:
         now_ns = np.array([round(self._last_t * 1e9)], dtype=np.int64)
         for link, (read, batch) in self._counters.items():
             counts = np.asarray([read()], dtype=float)
-            batch.send(self._rec, now_ns, {_s(f"{MAVLINK}/{link}"): counts})
+            batch.send(self._rec, now_ns, {scalars_key(f"{MAVLINK}/{link}"): counts})
         self._next_flush_s = self._last_t + self._every_s
         self._flush_deadline = time.perf_counter() + FLUSH_WALL_S
 
@@ -395,119 +337,6 @@ class FlightRecorder:
 
     def _scalars(self, path: str, t_s: np.ndarray, values: np.ndarray) -> None:
         self._send(path, t_s, rr.Scalars.columns(scalars=values))
-
-    def _send_rows(self, a: np.ndarray) -> None:
-        t = a[:, T]
-        time_ns = np.rint(t * 1e9).astype(np.int64)
-        p, v, q = a[:, P : P + 3], a[:, V : V + 3], a[:, Q : Q + 4]
-        sp, spv = a[:, SP : SP + 3], a[:, SPV : SPV + 3]
-        ge, true_ge = a[:, GE : GE + 3], a[:, TRUE : TRUE + 3]
-        w, x, y, z = q.T
-        roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-        pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
-        values = {
-            _s("plots/position"): p,
-            _s("plots/velocity"): v,
-            _s("plots/setpoint"): sp,
-            _s("plots/z"): np.column_stack((p[:, 2], sp[:, 2])),
-            _s("plots/height"): a[:, H],
-            _s("plots/mode"): a[:, MODE],
-            _s("plots/errors/position"): sp - p,
-            _s("plots/errors/velocity"): spv - v,
-            _s("plots/errors/attitude"): a[:, DES : DES + 2] - np.column_stack((roll, pitch)),
-            _s("plots/rotors/commanded"): a[:, N : N + 4],
-        }
-        for i, axis in enumerate("xyz"):
-            values[_s(f"plots/ground_effect/{axis}/predicted")] = ge[:, i]
-        self._step_batch.send(self._rec, time_ns, values)
-        has_truth = ~np.isnan(true_ge[:, 0])
-        if has_truth.any():
-            values = {
-                _s(f"plots/ground_effect/{axis}/true"): true_ge[has_truth, i]
-                for i, axis in enumerate("xyz")
-            }
-            self._truth_batch.send(self._rec, time_ns[has_truth], values)
-        has_esc = ~np.isnan(a[:, ACT])
-        if has_esc.any():
-            actual = a[has_esc, ACT : ACT + 4] / RAD_S_TO_RPM
-            self._esc_batch.send(self._rec, time_ns[has_esc], {_s("plots/rotors/actual"): actual})
-        self._send_scene(t, time_ns, p, q, ge, true_ge)
-        self._send_trail(t, p)
-
-    def _send_scene(
-        self,
-        t: np.ndarray,
-        time_ns: np.ndarray,
-        p: np.ndarray,
-        q: np.ndarray,
-        ge: np.ndarray,
-        true_ge: np.ndarray,
-    ) -> None:
-        """The drone's pose and the ground-effect arrows at SCENE_PERIOD_S (the plots keep
-        every step): a 3-D view needs no more, and it is a third of the data."""
-        keep = _firsts(t, self._scene_t, SCENE_PERIOD_S)
-        # the truth last received (it comes every step unless the world slows it down)
-        seen = np.flatnonzero(~np.isnan(true_ge[:, 0]))
-        truth = np.tile(self._truth_held, (len(t), 1))
-        if len(seen):
-            held = np.searchsorted(seen, np.arange(len(t)), side="right") - 1
-            truth[held >= 0] = true_ge[seen[held[held >= 0]]]
-            self._truth_held = true_ge[seen[-1]]
-        self._scene_t = t[-1]
-        if not keep.any():
-            return
-        values = {
-            f"{DRONE}:Transform3D:translation": p[keep],
-            f"{DRONE}:Transform3D:quaternion": q[keep][:, [1, 2, 3, 0]],  # rerun's: x y z w
-            f"{GE_PREDICTED_ARROW}:Arrows3D:origins": p[keep],
-            f"{GE_PREDICTED_ARROW}:Arrows3D:vectors": ge[keep] * GE_ARROW_M_PER_N,
-            f"{GE_TRUE_ARROW}:Arrows3D:origins": p[keep],
-            f"{GE_TRUE_ARROW}:Arrows3D:vectors": truth[keep] * GE_ARROW_M_PER_N,
-        }
-        self._scene_batch.send(self._rec, time_ns[keep], values)
-
-    def _send_trail(self, t: np.ndarray, p: np.ndarray) -> None:
-        """The flown path: a point every TRAIL_SPACING_M flown, drawn every TRAIL_PERIOD_S up
-        to the drone. A 3-D view shows the latest value of each entity, so the trail is
-        redrawn rather than appended to; to keep that linear in the flight's length it is cut
-        into segments of TRAIL_SEGMENT_S (`world/trajectory/<k>`), and only the segment in
-        progress is redrawn."""
-        if self._trail_last is None:
-            self._segment_points, self._trail_last = p[:1], p[0]
-        steps = np.linalg.norm(np.diff(np.vstack((self._trail_last, p)), axis=0), axis=1)
-        flown = self._trail_length_m + np.cumsum(steps)
-        before = np.concatenate(([self._trail_length_m], flown[:-1]))
-        keep = np.floor(flown / TRAIL_SPACING_M) > np.floor(before / TRAIL_SPACING_M)
-        kept_t, kept_p = t[keep], p[keep]
-        self._trail_length_m, self._trail_last = float(flown[-1]), p[-1]
-        drawn: dict[int, tuple[list[float], list[np.ndarray]]] = {}
-        used = 0
-        for i in np.flatnonzero(_firsts(t, self._trail_t, TRAIL_PERIOD_S)):
-            upto = int(np.searchsorted(kept_t, t[i], side="right"))
-            points = np.vstack((self._segment_points, kept_p[used:upto]))
-            used = upto
-            segment = int(t[i] // TRAIL_SEGMENT_S)
-            if segment != self._segment:  # start the next one where the last drawing ended
-                points = points[max(self._segment_drawn - 1, 0) :]
-                self._segment = segment
-            self._segment_points, self._segment_drawn = points, len(points)
-            times, strips = drawn.setdefault(segment, ([], []))
-            times.append(t[i])
-            strips.append(np.vstack((points, p[i : i + 1])))
-        self._trail_t = t[-1]
-        self._segment_points = np.vstack((self._segment_points, kept_p[used:]))
-        for segment, (times, strips) in drawn.items():
-            path = f"{TRAJECTORY}/{segment}"
-            if path not in self._trail_batches:
-                batch = ColumnBatch(TIMELINE)
-                batch.add(path, rr.LineStrips3D.columns(strips=[np.zeros((2, 3))], colors=[0]))
-                self._trail_batches[path] = batch
-            values = {
-                f"{path}:LineStrips3D:strips": strips,
-                f"{path}:LineStrips3D:colors": np.full(len(strips), TRAIL_RGBA, dtype=np.uint32),
-            }
-            time_ns = np.rint(np.asarray(times) * 1e9).astype(np.int64)
-            self._trail_batches[path].send(self._rec, time_ns, values)
 
     # -- the static part and the start ------------------------------------------------------
 

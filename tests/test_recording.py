@@ -86,6 +86,26 @@ def test_every_entity_of_the_layout_is_there_with_increasing_times(flown):
     assert received > 3 * flown[0]["steps"] and dropped == rejected == 0
 
 
+def test_the_default_blueprint_shows_what_is_recorded(flown):
+    import rerun.chunk as rc
+
+    recording = read_recording(flown[0]["recording"])
+    reader = rc.RrdReader(flown[0]["recording"])
+    views: dict[str, dict[str, list[str]]] = {}
+    for chunk in reader.stream(store=reader.blueprints()[0]):
+        batch = chunk.to_record_batch()
+        for name in ("ViewBlueprint:display_name", "ViewBlueprint:space_origin"):
+            if name in batch.schema.names:
+                views.setdefault(chunk.entity_path, {})[name] = batch.column(name).to_pylist()[0]
+    origins = {
+        v["ViewBlueprint:display_name"][0]: v["ViewBlueprint:space_origin"][0]
+        for v in views.values()
+    }
+    assert {"world", "z and its setpoint (m)", "ground effect z (N)", "events"} <= set(origins)
+    for name, origin in origins.items():  # every view looks at something in the recording
+        assert any(p == origin or p.startswith(origin + "/") for p in recording.entities), name
+
+
 def test_true_and_predicted_ground_effect_are_both_recorded(flown):
     recording = read_recording(flown[0]["recording"])
     t_true, true_z = recording.scalars("plots/ground_effect/z/true")
@@ -219,3 +239,25 @@ def test_review_web_serves_the_viewer_on_a_headless_machine(flown):
             review.kill()
             out, _ = review.communicate()
     assert "groundfx review:" in out and f"127.0.0.1:{web}" in out
+
+
+def test_the_trail_is_drawn_in_segments_that_join_up():
+    from autopilot.trail import Trail
+
+    trail = Trail(spacing_m=0.01, period_s=0.25, segment_s=10.0)
+    t = np.arange(0, 25.0, 0.004)
+    p = np.column_stack((0.05 * t, np.sin(t), np.zeros_like(t)))  # 25 s of flight
+    last: dict[int, np.ndarray] = {}
+    last_t = 0.0
+    for i in range(0, len(t), 500):  # flushes of 2 s
+        for segment, (times, strips) in trail.update(t[i : i + 500], p[i : i + 500]).items():
+            assert np.all(np.diff(times) > 0) and all(s.shape[1] == 3 for s in strips)
+            last[segment], last_t = strips[-1], times[-1]
+    assert sorted(last) == [0, 1, 2] and last_t == pytest.approx(24.75, abs=0.005)
+    np.testing.assert_allclose(last[0][0], p[0])  # from the start
+    np.testing.assert_allclose(last[2][-1], p[t <= last_t][-1])  # to the drone
+    for k in (0, 1):  # each segment's final drawing ends where the next one begins
+        np.testing.assert_allclose(last[k][-1], last[k + 1][0], atol=0.011)
+    drawn = sum(np.linalg.norm(np.diff(s, axis=0), axis=1).sum() for s in last.values())
+    flown = np.linalg.norm(np.diff(p[t <= last_t], axis=0), axis=1).sum()
+    assert drawn == pytest.approx(flown, rel=1e-3)
