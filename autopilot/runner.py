@@ -172,10 +172,15 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     ended = "landed"
     samples: list[tuple[float, ...]] = []
     next_sample_s = 0.0
-    link = SimLink(config.sim_url, timeout_s=config.link_timeout_s)
+    # The recorder first: the simulator's clock starts when the link connects.
     recorder = open_recorder(
         config.record, vehicle, config.mission, config.commander.takeoff_altitude_m, MODES
     )
+    try:
+        link = SimLink(config.sim_url, timeout_s=config.link_timeout_s)
+    except LinkLost as lost:
+        recorder.close(str(lost))
+        raise
     recorder.watch_counters("sim", link.counters)
     wall0 = time.perf_counter()
     try:

@@ -12,6 +12,8 @@ import os
 from datetime import datetime
 from pathlib import Path
 
+from simbridge.config import ConfigError
+
 LOGS_ENV = "GROUNDFX_LOGS"
 
 
@@ -51,7 +53,14 @@ def add_record_options(p: argparse.ArgumentParser, world: bool = False) -> None:
 
 
 def record_path(args: argparse.Namespace) -> Path | None:
-    """The recording file the options ask for (None: off)."""
+    """The recording file the options ask for (None: off); its folder made, or a message."""
     if args.no_record:
         return None
-    return args.record or default_recording_path(args.mission, args.model)
+    path = args.record or default_recording_path(args.mission, args.model)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(f"--record: cannot write {path}: {err.strerror}") from None
+    if path.is_dir() or not os.access(path.parent, os.W_OK):
+        raise ConfigError(f"--record: cannot write {path}")
+    return path
