@@ -96,13 +96,18 @@ _TRAJECTORY_PARTS = ("plots/velocity", "plots/z", "plots/height", "plots/mode")
 
 @dataclass
 class Entity:
-    """One entity's rows in the order written: times (s; None for static data) and the
-    values of each component column (`Scalars:scalars`, `Transform3D:translation`, ...)."""
+    """One entity's chunks in the order written: their times (s; None for static data) and
+    the values of each component column (`Scalars:scalars`, `Transform3D:translation`, ...)."""
 
     path: str
-    times_s: list[np.ndarray] = field(default_factory=list)
-    columns: dict[str, list[Any]] = field(default_factory=dict)
-    static: bool = False
+    chunks: list[tuple[np.ndarray | None, dict[str, Any]]] = field(default_factory=list)
+
+    def temporal(self, component: str | None = None) -> list[tuple[np.ndarray, dict[str, Any]]]:
+        return [
+            (t, columns)
+            for t, columns in self.chunks
+            if t is not None and (component is None or component in columns)
+        ]
 
 
 @dataclass
@@ -115,30 +120,38 @@ class Recording:
     def entity_paths(self) -> list[str]:
         return sorted(self.entities)
 
-    def times(self, path: str) -> np.ndarray:
-        """The sim_time of each row of a temporal entity, s, in the order written."""
-        entity = self._entity(path)
-        return np.concatenate(entity.times_s) if entity.times_s else np.zeros(0)
+    def times(self, path: str, component: str | None = None) -> np.ndarray:
+        """The sim_time (s) of each row of an entity (that has `component`), in the order
+        written; empty for static data."""
+        parts = [t for t, _ in self._entity(path).temporal(component)]
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    def values(self, path: str, component: str) -> np.ndarray:
+        """A component of fixed width over time as one array [rows, width], rows as `times`
+        (e.g. `Transform3D:translation` gives [N, 3], `Scalars:scalars` [N, k])."""
+        parts = [columns[component] for _, columns in self._entity(path).temporal(component)]
+        if not parts:
+            raise KeyError(f"{self.path}: {path} has no {component} over time")
+        return np.concatenate(parts)
+
+    def static(self, path: str, component: str) -> Any:
+        """The value of a static component (the last one logged)."""
+        found = [c[component] for t, c in self._entity(path).chunks if t is None and component in c]
+        if not found:
+            raise KeyError(f"{self.path}: {path} has no static {component}")
+        return found[-1][-1]
 
     def scalars(self, path: str) -> tuple[np.ndarray, np.ndarray]:
         """A time series: (times s [N], values [N, k]) with k = len(SERIES[path])."""
-        return self.times(path), self.values(path, "Scalars:scalars")
-
-    def values(self, path: str, component: str) -> np.ndarray:
-        """A component of fixed width as one array [rows, width] (e.g. `Transform3D:translation`
-        gives [N, 3], `Scalars:scalars` [N, k])."""
-        parts = self._entity(path).columns.get(component)
-        if not parts:
-            raise KeyError(f"{self.path}: {path} has no {component}")
-        return np.concatenate(parts)
+        return self.times(path, "Scalars:scalars"), self.values(path, "Scalars:scalars")
 
     def texts(self, path: str = EVENTS) -> list[tuple[float, str, str]]:
         """A text log: (time s, level, text) per row."""
-        entity = self._entity(path)
-        times = self.times(path)
-        texts = [t for part in entity.columns.get("TextLog:text", []) for t in part]
-        levels = [lv for part in entity.columns.get("TextLog:level", []) for lv in part]
-        return list(zip(times.tolist(), levels, texts, strict=True))
+        rows: list[tuple[float, str, str]] = []
+        for t, columns in self._entity(path).temporal("TextLog:text"):
+            levels = columns.get("TextLog:level", [None] * len(t))
+            rows += zip(t.tolist(), levels, columns["TextLog:text"], strict=True)
+        return rows
 
     def trajectory(self) -> np.ndarray:
         """The flown trajectory as the autopilot logs it (autopilot.metrics.COLUMNS):
@@ -180,26 +193,23 @@ def read_recording(path: str | Path) -> Recording:
         if chunk.entity_path == _PROPERTIES:
             continue
         _add_chunk(entities, chunk.entity_path.strip("/"), chunk.to_record_batch())
-    meta: dict[str, Any] = {}
+    recording = Recording(path=path, entities=entities, complete=complete, meta={})
     if META in entities:
-        texts = entities[META].columns.get("TextDocument:text", [])
-        if texts:
-            meta = json.loads(texts[-1][-1])
-    return Recording(path=path, entities=entities, complete=complete, meta=meta)
+        recording.meta = json.loads(recording.static(META, "TextDocument:text"))
+    return recording
 
 
 def _add_chunk(entities: dict[str, Entity], path: str, batch: pa.RecordBatch) -> None:
-    entity = entities.setdefault(path, Entity(path))
     names = batch.schema.names
+    times = None
     if TIMELINE in names:
-        ns = batch.column(TIMELINE).cast(pa.int64()).to_numpy(zero_copy_only=False)
-        entity.times_s.append(ns * 1e-9)
-    else:
-        entity.static = True
-    for name in names:
-        if name == TIMELINE or name.startswith("rerun."):
-            continue
-        entity.columns.setdefault(name, []).append(_to_numpy(batch.column(name)))
+        times = batch.column(TIMELINE).cast(pa.int64()).to_numpy(zero_copy_only=False) * 1e-9
+    columns = {
+        name: _to_numpy(batch.column(name))
+        for name in names
+        if name != TIMELINE and not name.startswith("rerun.")
+    }
+    entities.setdefault(path, Entity(path)).chunks.append((times, columns))
 
 
 def _to_numpy(column: pa.Array) -> Any:
