@@ -63,7 +63,7 @@ from simbridge.world import World
 TRUTH = "DEBUG_VECT"
 TRUTH_NAME = "GE_TRUE"
 ESC = "ESC_TELEMETRY_1_TO_4"
-FLUSH_EVERY_S = 2.0  # simulated seconds between flushes, at most (what a SIGKILL may lose)
+FLUSH_EVERY_S = 4.0  # simulated seconds between flushes, at most (what a SIGKILL may lose)
 FLUSH_WALL_S = 0.5  # ... and wall seconds: when the simulator runs slower than 4x real time
 NAN3 = (math.nan,) * 3
 NAN4 = (math.nan,) * 4
