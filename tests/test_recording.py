@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from autopilot.recorder import FlightRecorder, RecordOptions
+from autopilot.flight_recorder import FlightRecorder
+from autopilot.recorder import RecordOptions
 from autopilot.recording import ENTITY_PATHS, OBSTACLES, TRAJECTORY, read_recording
 from autopilot.runner import MODES
 from mission.fly import autopilot_command
