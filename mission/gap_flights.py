@@ -83,7 +83,7 @@ def fly_log(
         path = out.with_suffix(".mission.yaml")
         path.write_text(yaml.safe_dump(mission))
     raw = out.with_suffix(".clean.csv")
-    summary = fly(path, str(world), model, rho=1.0, via_gcs=False, flight_log=raw)
+    summary = fly(path, str(world), model, rho=1.0, via_gcs=False, flight_log=raw, record=False)
     if not raw.exists():
         raise RuntimeError(f"{out.name}: the flight wrote no log ({summary.get('ended')})")
     raw.replace(out)
