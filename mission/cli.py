@@ -28,6 +28,16 @@ def _speedup(text: str) -> float | None:
     return value
 
 
+def _max_flight_s(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 1.0 <= value <= 86400.0:
+        raise argparse.ArgumentTypeError(f"expected seconds in [1, 86400], got {text!r}")
+    return value
+
+
 def _port(text: str) -> int:
     try:
         value = int(text)
@@ -186,6 +196,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
     p.add_argument("--flight-log", type=Path, help="save airborne steps as a gap-diagnosis log")
+    p.add_argument(
+        "--max-flight-s", type=_max_flight_s, default=900.0,
+        help="end the flight (exit code 3) after this many simulated seconds (default 900)",
+    )  # fmt: skip
     add_record_options(p, world=True)
     p.set_defaults(func=commands.cmd_autopilot)
 

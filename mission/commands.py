@@ -149,6 +149,7 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
         signing=Signing(args.signing_key_file) if args.signing_key_file else None,
         should_stop=lambda: bool(stop),
         on_step=_flight_log_writer(args),
+        max_flight_s=args.max_flight_s,
     )
 
     def on_signal(signum: int, frame: object) -> None:

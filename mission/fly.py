@@ -63,6 +63,7 @@ def fly(
     say: Callable[[str], None] = lambda text: None,
     flight_log: Path | None = None,
     record: bool | Path = True,
+    max_flight_s: float | None = None,
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line.
 
@@ -84,6 +85,8 @@ def fly(
         options += ["--network", str(network)]
     if flight_log is not None:
         options += ["--flight-log", str(flight_log)]
+    if max_flight_s is not None:
+        options += ["--max-flight-s", str(max_flight_s)]
     if record is False:
         options += ["--no-record"]
     else:

@@ -23,6 +23,9 @@ BENCH_NOISE: dict[str, float] = {
     "rotor_rad_s": 0.0,  # commands: the autopilot knows what it sent
     "accel_m_s2": 0.1,
 }
+# A bench mission lasts 15-30 simulated seconds; one still flying after this failed (it is a
+# figure of the bench, not a hang).
+MAX_FLIGHT_S = 90.0
 KINDS = ("mixed", "hover", "aggressive", "wall")
 
 
@@ -70,7 +73,11 @@ def bench_mission(kind: str, seed: int) -> dict[str, Any]:
 
 
 def fly_log(
-    mission: dict[str, Any] | Path, world: Path, out: Path, model: str = "analytic"
+    mission: dict[str, Any] | Path,
+    world: Path,
+    out: Path,
+    model: str = "analytic",
+    max_flight_s: float = MAX_FLIGHT_S,
 ) -> Path:
     """Fly `mission` in `world` through `fly` (simulator and autopilot processes in lockstep,
     the autopilot arming by itself) and keep its flight log at `out` (reused if present)."""
@@ -83,7 +90,10 @@ def fly_log(
         path = out.with_suffix(".mission.yaml")
         path.write_text(yaml.safe_dump(mission))
     raw = out.with_suffix(".clean.csv")
-    summary = fly(path, str(world), model, rho=1.0, via_gcs=False, flight_log=raw, record=False)
+    summary = fly(path, str(world), model, rho=1.0, via_gcs=False, flight_log=raw,
+                  record=False, max_flight_s=max_flight_s)  # fmt: skip
+    if not summary.get("landed"):
+        raise RuntimeError(f"{out.name}: the flight did not land ({summary.get('ended')})")
     if not raw.exists():
         raise RuntimeError(f"{out.name}: the flight wrote no log ({summary.get('ended')})")
     raw.replace(out)
