@@ -16,6 +16,14 @@ from simbridge.rotors import Quad
 from simbridge.vehicle import GRAVITY_M_S2
 
 
+def kinematic_acceleration_m_s2(step: Step, state: FlightState) -> tuple[float, float, float]:
+    """The accelerometer's specific force (body FRD) in the world frame, gravity removed: the
+    vehicle's acceleration over the control period that ends at this step."""
+    s = step.sensor
+    a = rotate(quat_to_matrix(state.quaternion), frd_to_flu((s["xacc"], s["yacc"], s["zacc"])))
+    return (a[0], a[1], a[2] - GRAVITY_M_S2)
+
+
 class FlightLogWriter:
     """Collects rows: the state at the step's time, and the accelerometer and rotor commands
     of the control period that just ended."""
@@ -25,8 +33,6 @@ class FlightLogWriter:
         self.rows: list[tuple[float, ...]] = []
 
     def __call__(self, t_s: float, step: Step, state: FlightState, applied_rad_s: Quad) -> None:
-        s = step.sensor
-        a = rotate(quat_to_matrix(state.quaternion), frd_to_flu((s["xacc"], s["yacc"], s["zacc"])))
         self.rows.append(
             (
                 t_s,
@@ -35,9 +41,7 @@ class FlightLogWriter:
                 *state.quaternion,
                 *state.angular_velocity_body_rad_s,
                 *applied_rad_s,
-                a[0],
-                a[1],
-                a[2] - GRAVITY_M_S2,
+                *kinematic_acceleration_m_s2(step, state),
             )
         )
 

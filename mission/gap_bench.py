@@ -189,8 +189,9 @@ def _world_file(path: Path, case: Case, effects: tuple[dict, ...]) -> Path:
     return path
 
 
-def run_case(case: Case, out: Path, replay: bool = True) -> dict[str, Any]:
-    """Fly (or reuse) the case's flights, diagnose blind, score."""
+def run_case(case: Case, out: Path, replay: bool = True, record: bool = False) -> dict[str, Any]:
+    """Fly (or reuse) the case's flights, diagnose blind, score. `record`: the clean flights
+    are also kept as rerun recordings (flight<seed>.truth.rrd)."""
     from mission.gap_cli import run_diagnosis
 
     folder = out / case.name
@@ -204,7 +205,8 @@ def run_case(case: Case, out: Path, replay: bool = True) -> dict[str, Any]:
     logs = {}
     for seed in FIT_SEEDS + HOLD_SEEDS:
         mission = bench_mission(case.kind, seed)
-        logs[seed] = real_log(mission, real, folder / f"flight{seed}.csv", BENCH_NOISE, seed)
+        path = folder / f"flight{seed}.csv"
+        logs[seed] = real_log(mission, real, path, BENCH_NOISE, seed, record)
     result = run_diagnosis(
         [logs[s] for s in FIT_SEEDS],
         [logs[s] for s in HOLD_SEEDS],
@@ -266,11 +268,13 @@ def _floor(effect: str, truth: dict[str, float]) -> float:
     return max(abs(v) for v in truth.values())
 
 
-def run_bench(cases: list[Case], out: Path) -> dict[str, Any]:
+def run_bench(cases: list[Case], out: Path, replay: bool = False) -> dict[str, Any]:
+    """Every case; `replay`: with the closed-loop re-flights of the held-out missions (two
+    more flights a case)."""
     results = []
     for case in cases:
         try:
-            results.append(run_case(case, out))
+            results.append(run_case(case, out, replay=replay))
         except Exception as err:  # a failed case is a figure of the bench, not its end
             results.append({"case": case.name, "error": f"{type(err).__name__}: {err}"})
         print(f"gap bench: {case.name}: {_line(results[-1])}", flush=True)

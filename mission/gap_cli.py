@@ -20,7 +20,7 @@ def add_parser(sub: Any) -> None:
         dest="gap_command", required=True
     )
     d = g.add_parser("diagnose", help="residuals, effects and a corrected world from flight logs")
-    d.add_argument("logs", type=Path, nargs="+", help="flight logs (.csv or .parquet)")
+    d.add_argument("logs", type=Path, nargs="+", help="flight logs (.csv, .parquet, .rrd)")
     d.add_argument("--world", required=True, help="the nominal world (YAML or packaged name)")
     d.add_argument("--holdout", type=Path, nargs="+", default=[], help="logs to score only")
     d.add_argument("--folds", type=int, default=3, help="cross-validation folds over flights")
@@ -32,6 +32,10 @@ def add_parser(sub: Any) -> None:
     b = g.add_parser("bench", help="the diagnosis, scored on flights with withheld effects")
     b.add_argument("--out", type=Path, required=True, help="output folder (flights are cached)")
     b.add_argument("--cases", help="comma-separated case names (default: all)")
+    b.add_argument(
+        "--replay", action="store_true",
+        help="also fly each held-out mission again in the nominal and corrected worlds",
+    )  # fmt: skip
     b.add_argument("--json", action="store_true", help="print the scores as one JSON object")
     b.set_defaults(func=cmd_bench)
 
@@ -118,7 +122,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if unknown:
         raise ConfigError(f"--cases: unknown case {unknown[0]!r}; known: {', '.join(CASES)}")
     wall0 = time.perf_counter()
-    scores = run_bench([CASES[n] for n in names], args.out)
+    scores = run_bench([CASES[n] for n in names], args.out, args.replay)
     scores["wall_s"] = time.perf_counter() - wall0
     (args.out / "bench.json").write_text(json.dumps(scores, indent=1))
     print(json.dumps(scores) if args.json else table(scores))

@@ -78,9 +78,11 @@ def fly_log(
     out: Path,
     model: str = "analytic",
     max_flight_s: float = MAX_FLIGHT_S,
+    record: bool = False,
 ) -> Path:
     """Fly `mission` in `world` through `fly` (simulator and autopilot processes in lockstep,
-    the autopilot arming by itself) and keep its flight log at `out` (reused if present)."""
+    the autopilot arming by itself) and keep its flight log at `out` (reused if present);
+    `record`: its rerun recording too, beside it (.rrd)."""
     if out.exists():
         return out
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -91,7 +93,8 @@ def fly_log(
         path.write_text(yaml.safe_dump(mission))
     raw = out.with_suffix(".clean.csv")
     summary = fly(path, str(world), model, rho=1.0, via_gcs=False, flight_log=raw,
-                  record=False, max_flight_s=max_flight_s)  # fmt: skip
+                  record=out.with_suffix(".rrd") if record else False,
+                  max_flight_s=max_flight_s)  # fmt: skip
     if not summary.get("landed"):
         raise RuntimeError(f"{out.name}: the flight did not land ({summary.get('ended')})")
     if not raw.exists():
@@ -102,12 +105,18 @@ def fly_log(
 
 
 def real_log(
-    mission: dict[str, Any], world: Path, out: Path, noise: dict[str, float], seed: int
+    mission: dict[str, Any],
+    world: Path,
+    out: Path,
+    noise: dict[str, float],
+    seed: int,
+    record: bool = False,
 ) -> Path:
-    """A "real" flight: flown in the withheld world, written with sensor noise; cached."""
+    """A "real" flight: flown in the withheld world, written with sensor noise; cached. The
+    clean flight is kept beside it (.truth.csv; `record`: also .truth.rrd)."""
     if out.exists():
         return out
-    clean = fly_log(mission, world, out.with_suffix(".truth.csv"))
+    clean = fly_log(mission, world, out.with_suffix(".truth.csv"), record=record)
     log = read_log(clean)
     noisy: FlightLog = add_noise(log, noise, seed)
     return write_log(noisy, out)

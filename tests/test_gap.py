@@ -1,15 +1,20 @@
 """The gap diagnosis end to end on real flights (simulator and autopilot processes): a withheld
 rotor drag is found with its parameters, a null world raises no false alarm, and
-`groundfx gap diagnose` reads another vehicle's CSV through a column mapping."""
+`groundfx gap diagnose` reads another vehicle's CSV through a column mapping and our own rerun
+recordings. The rotor-drag flights are flown once for the module (5 flights: 2 fitting, 1
+held out, its mission replayed in the nominal and the corrected world)."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 import yaml
 
+from learner.gap.logs import read_log
 from mission.cli import main
 from mission.gap_bench import CASES, run_case
 
@@ -19,13 +24,20 @@ def bench_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("gap_bench")
 
 
-def test_withheld_rotor_drag_is_found_within_10_percent(bench_dir: Path) -> None:
-    result = run_case(CASES["rotor_drag_b"], bench_dir)
+@pytest.fixture(scope="module")
+def drag(bench_dir: Path) -> dict[str, Any]:
+    """The rotor-drag case, its clean flights also recorded."""
+    return run_case(CASES["rotor_drag_b"], bench_dir, record=True)
+
+
+def test_withheld_rotor_drag_is_found_within_10_percent(bench_dir: Path, drag: dict) -> None:
+    result = drag
     assert result["reported"] == ["rotor_drag"]
     drag = result["effects"]["rotor_drag"]
     assert max(drag["relative_errors"][:2]) <= 0.10  # kx, ky: the horizontal drag flown
     assert result["force_shrink"] >= 0.8
     assert result["effects"]["ceiling_effect"]["status"] == "not identifiable"  # no ceiling
+    assert result["closed_loop"]["shrink"] > 0.0  # the corrected world flies closer to the log
     corrected = yaml.safe_load(
         (bench_dir / "rotor_drag_b/diagnosis/corrected_world.yaml").read_text()
     )
@@ -41,12 +53,13 @@ def test_null_world_raises_no_false_alarm(bench_dir: Path) -> None:
     assert result["false_alarm"] is False
 
 
-def test_diagnose_reads_renamed_columns(bench_dir: Path, tmp_path: Path, capsys) -> None:
+def test_diagnose_reads_renamed_columns(
+    bench_dir: Path, drag: dict, tmp_path: Path, capsys
+) -> None:
     """The bench's logs rewritten with other names and units, diagnosed through a mapping."""
     import csv
 
     src = sorted((bench_dir / "rotor_drag_b").glob("flight[0-9].csv"))
-    assert src, "the rotor-drag test flies these logs first"
     renamed = []
     for path in src:
         rows = list(csv.reader(ln for ln in path.open() if not ln.startswith("#")))
@@ -74,3 +87,28 @@ def test_diagnose_reads_renamed_columns(bench_dir: Path, tmp_path: Path, capsys)
     assert main(["gap", "diagnose", str(renamed[0]), "--world", str(world), "--columns",
                  str(mapping), "--no-replay", "--out", str(tmp_path / "bad")]) == 2  # fmt: skip
     assert "missing column 'nope'" in capsys.readouterr().err
+
+
+def test_diagnose_reads_recordings(bench_dir: Path, drag: dict, tmp_path: Path) -> None:
+    """A flight's rerun recording gives the rows of its --flight-log CSV; the diagnosis on
+    recordings finds the withheld rotor drag."""
+    folder = bench_dir / "rotor_drag_b"
+    csv_log, rec_log = (
+        read_log(folder / "flight0.truth.csv"),
+        read_log(folder / "flight0.truth.rrd"),
+    )
+    assert len(rec_log) == len(csv_log) > 1000
+    np.testing.assert_allclose(rec_log.time_s, csv_log.time_s, atol=1e-9)
+    for field in ("position_m", "quaternion", "rotor_speeds_rad_s", "acceleration_m_s2"):
+        np.testing.assert_allclose(getattr(rec_log, field), getattr(csv_log, field), atol=1e-6)
+    recordings = [str(folder / f"flight{s}.truth.rrd") for s in (0, 1, 100)]
+    world = str(folder / "nominal_world.yaml")
+    code = main(["gap", "diagnose", *recordings[:2], "--holdout", recordings[2], "--world", world,
+                 "--folds", "2", "--no-replay", "--out", str(tmp_path / "out")])  # fmt: skip
+    assert code == 0
+    figures = json.loads((tmp_path / "out/gap.json").read_text())
+    drag_fit = figures["effects"]["rotor_drag"]
+    assert drag_fit["status"] == "present"
+    truth = CASES["rotor_drag_b"].truth["rotor_drag"]
+    for p in ("kx", "ky"):
+        assert drag_fit["parameters"][p]["value"] == pytest.approx(truth[p], rel=0.10)

@@ -149,7 +149,7 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
         table = pq.read_table(path)
         return {n: np.asarray(table[n].to_numpy(), dtype=float) for n in table.column_names}
     if path.suffix != ".csv":
-        raise ConfigError(f"{path}: expected a .csv or .parquet flight log")
+        raise ConfigError(f"{path}: expected a .csv, .parquet or .rrd flight log")
     try:
         with path.open(newline="") as f:
             rows = list(csv.reader(line for line in f if not line.startswith("#")))
@@ -166,8 +166,13 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
 
 
 def read_log(path: Path, mapping: ColumnMapping | None = None) -> FlightLog:
-    """A CSV or Parquet flight log through `mapping` (default: our own column names)."""
+    """A CSV or Parquet flight log through `mapping` (default: our own column names), or one
+    of our rerun recordings (.rrd)."""
     path = Path(path)
+    if path.suffix == ".rrd":  # our own recordings: their layout is fixed, no mapping
+        from learner.gap.recording_log import read_recording_log
+
+        return read_recording_log(path)
     mapping = mapping or ColumnMapping()
     raw = _read_table(path)
 
