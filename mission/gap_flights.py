@@ -24,8 +24,10 @@ BENCH_NOISE: dict[str, float] = {
     "accel_m_s2": 0.1,
 }
 # A bench mission lasts 15-30 simulated seconds; one still flying after this failed (it is a
-# figure of the bench, not a hang).
-MAX_FLIGHT_S = 90.0
+# figure of the bench, not a hang) unless it was landing: in a ground effect much stronger
+# than the autopilot's model, the vehicle sinks ever slower onto a cushion a few mm above its
+# touchdown height (rho 2.5 against the model's 1: 21 mm after 75 s of landing).
+MAX_FLIGHT_S = 60.0
 KINDS = ("mixed", "hover", "aggressive", "wall")
 
 
@@ -91,17 +93,30 @@ def fly_log(
     else:
         path = out.with_suffix(".mission.yaml")
         path.write_text(yaml.safe_dump(mission))
-    raw = out.with_suffix(".clean.csv")
+    raw, track = out.with_suffix(".clean.csv"), out.with_suffix(".track.npz")
     summary = fly(path, str(world), model, rho=1.0, via_gcs=False, flight_log=raw,
                   record=out.with_suffix(".rrd") if record else False,
-                  max_flight_s=max_flight_s)  # fmt: skip
-    if not summary.get("landed"):
+                  max_flight_s=max_flight_s, trajectory=track)  # fmt: skip
+    if not summary.get("landed") and not _ended_landing(track):
         raise RuntimeError(f"{out.name}: the flight did not land ({summary.get('ended')})")
     if not raw.exists():
         raise RuntimeError(f"{out.name}: the flight wrote no log ({summary.get('ended')})")
     raw.replace(out)
     out.with_suffix(".clean.json").replace(out.with_suffix(".json"))
     return out
+
+
+def _ended_landing(track: Path) -> bool:
+    """The flight's last step was in the landing phase (its trajectory file)."""
+    import numpy as np
+
+    from autopilot.runner import MODES
+
+    if not track.exists():
+        return False
+    with np.load(track) as data:
+        columns, log = list(data["columns"]), data["log"]
+    return len(log) > 0 and log[-1, columns.index("mode")] == MODES.index("landing")
 
 
 def real_log(
