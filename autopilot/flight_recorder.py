@@ -158,7 +158,7 @@ class FlightRecorder:
                 *actual,
                 *desired,
                 *state.angular_velocity_body_rad_s,
-                *kinematic_acceleration_m_s2(msgs, state),
+                *(kinematic_acceleration_m_s2(msgs, state) if "xacc" in msgs.sensor else NAN3),
             )
         )
         self._last_t = t_s
