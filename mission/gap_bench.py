@@ -5,6 +5,8 @@ told, the diagnosis run blind on them, and its scores: exact-set identification,
 
 from __future__ import annotations
 
+import hashlib
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -83,7 +85,10 @@ def _cases() -> list[Case]:
                 kind="aggressive",
             )
         )
-    for tag, s in (("a", 0.93), ("b", 1.1)):
+    # more thrust, less mass: the position loop has no integral action (thesis: a PD with
+    # a0 = 1), so a thrust deficit of x g takes x g / a0 of height error: 0.7 m for 7%, and
+    # such a vehicle never leaves the ground cushion of a 0.3 m take-off
+    for tag, s in (("a", 1.05), ("b", 1.1)):
         c.append(
             Case(
                 f"thrust_coefficient_{tag}",
@@ -91,7 +96,7 @@ def _cases() -> list[Case]:
                 {"thrust_coefficient": {"scale": s}},
             )
         )
-    for tag, s in (("a", 1.07), ("b", 0.9)):
+    for tag, s in (("a", 0.95), ("b", 0.9)):
         c.append(
             Case(
                 f"mass_error_{tag}",
@@ -162,8 +167,8 @@ def _cases() -> list[Case]:
     c.append(
         Case(
             "pair_wind_mass",
-            ({"name": "wind", "mean_m_s": [1.0, 0.0, 0.0]}, {"name": "mass_error", "scale": 1.08}),
-            {"wind": {"wx": 1.0, "wy": 0.0, "wz": 0.0}, "mass_error": {"scale": 1.08}},
+            ({"name": "wind", "mean_m_s": [1.0, 0.0, 0.0]}, {"name": "mass_error", "scale": 0.93}),
+            {"wind": {"wx": 1.0, "wy": 0.0, "wz": 0.0}, "mass_error": {"scale": 0.93}},
             nominal=(GE, DRAG),
         )
     )
@@ -192,6 +197,18 @@ def _world_file(path: Path, case: Case, effects: tuple[dict, ...]) -> Path:
     return path
 
 
+def _drop_stale_flights(folder: Path, key_text: str) -> None:
+    """Cached flights are reused only for the same real world and mission kind."""
+    key = hashlib.sha256(key_text.encode()).hexdigest()[:16]
+    stamp = folder / "flights.key"
+    if stamp.exists() and stamp.read_text() == key:
+        return
+    for old in folder.glob("flight*"):
+        old.unlink()
+    shutil.rmtree(folder / "diagnosis", ignore_errors=True)
+    stamp.write_text(key)
+
+
 def run_case(case: Case, out: Path, replay: bool = True, record: bool = False) -> dict[str, Any]:
     """Fly (or reuse) the case's flights, diagnose blind, score. `record`: the clean flights
     are also kept as rerun recordings (flight<seed>.truth.rrd)."""
@@ -205,6 +222,7 @@ def run_case(case: Case, out: Path, replay: bool = True, record: bool = False) -
         tuple(e for e in case.nominal if e["name"] not in hidden_names) + case.hidden,
     )
     nominal = _world_file(folder / "nominal_world.yaml", case, case.nominal)
+    _drop_stale_flights(folder, real.read_text() + case.kind)
     logs = {}
     for seed in FIT_SEEDS + HOLD_SEEDS:
         mission = bench_mission(case.kind, seed)
