@@ -112,3 +112,25 @@ def test_diagnose_reads_recordings(bench_dir: Path, drag: dict, tmp_path: Path) 
     truth = CASES["rotor_drag_b"].truth["rotor_drag"]
     for p in ("kx", "ky"):
         assert drag_fit["parameters"][p]["value"] == pytest.approx(truth[p], rel=0.10)
+
+
+def test_torque_residual_vanishes_on_a_clean_flight_with_the_true_world(
+    bench_dir: Path, drag: dict
+) -> None:
+    """Equation 3.6 and the ground effect's hub torques explain a clean flight's rotational
+    dynamics; leaving the ground effect out leaves its torque."""
+    from learner.gap.candidates import nominal_values
+    from learner.gap.flightdata import prepare
+    from learner.gap.torque import torque_gap, torque_residual_n_m
+    from simbridge.vehicle import load_vehicle
+    from simbridge.world import load_world
+
+    folder = bench_dir / "rotor_drag_b"
+    vehicle, world = load_vehicle("nano"), load_world(folder / "real_world.yaml")
+    d = prepare(read_log(folder / "flight0.truth.csv"), world, vehicle)
+    true = nominal_values(world.effects)
+    residual = torque_residual_n_m(d, true, vehicle)
+    assert np.sqrt(np.mean(residual**2)) < 1e-6  # rotor moments: about 1e-4 N m
+    without_ge = {k: v for k, v in true.items() if k != "ground_effect"}
+    gap = torque_gap([d], without_ge, true, vehicle)
+    assert gap["shrink"] > 0.9

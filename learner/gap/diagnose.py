@@ -17,6 +17,7 @@ from learner.gap.regimes import REGIMES, RegimeBin, regime_table, regime_variabl
 from learner.gap.residual import force_gap_ms, residual_n
 from learner.gap.rollout import HORIZON_S, rms, rollout_errors, shrink
 from learner.gap.stats import ess_ratio
+from learner.gap.torque import torque_gap
 from simbridge.vehicle import Vehicle
 from simbridge.world import World
 
@@ -190,6 +191,7 @@ def held_out_gap(problem: gapfit.Problem, values: Values) -> dict[str, Any]:
         "before": rms(np.concatenate(problem.residuals).ravel()) * np.sqrt(3),
         "after": rms(np.concatenate(after).ravel()) * np.sqrt(3),
     }
+    out["torque_rms_n_m"] = torque_gap(problem.flights, problem.nominal, corrected, problem.vehicle)
     out["regions"] = _per_region(problem, after)
     return out
 

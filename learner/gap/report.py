@@ -184,6 +184,13 @@ def _markdown(
         f"- force gap (systematic RMS, noise removed): {f['before'] * 1000:.2f} mN -> "
         f"{f['after'] * 1000:.2f} mN, shrink {f['shrink'] * 100:.0f}%"
     )
+    if "torque_rms_n_m" in g:
+        q = g["torque_rms_n_m"]
+        lines.append(
+            f"- torque gap (body frame, RMS of 0.1 s means; holds the rate noise's floor): "
+            f"{q['before'] * 1e6:.2f} uN m -> {q['after'] * 1e6:.2f} uN m, "
+            f"shrink {q['shrink'] * 100:.0f}%"
+        )
     if "rollout_rms_m" in g:
         r = g["rollout_rms_m"]
         lines.append(
