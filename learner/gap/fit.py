@@ -122,11 +122,16 @@ def fit(problem: Problem, names: tuple[str, ...]) -> Fit:
     rss = float(sol.fun @ sol.fun)
     p = len(x0)
     sigma2 = rss / max(n - p, 1)
+    times = [d.time_s[s] for d, s in zip(problem.flights, rows, strict=True)]
+    blocks = np.concatenate([_block_ids(t, k) for k, t in enumerate(times)])
     try:
-        cov = np.linalg.pinv(sol.jac.T @ sol.jac) * sigma2 / problem.ess_ratio
+        bread = np.linalg.pinv(sol.jac.T @ sol.jac)
+        cov = bread * sigma2 / problem.ess_ratio
+        robust = block_sandwich(bread, sol.jac, sol.fun, np.repeat(blocks, 3))
+        var = np.maximum(np.diag(cov), np.diag(robust))
     except np.linalg.LinAlgError:
-        cov = np.full((p, p), np.inf)
-    se = np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale
+        var = np.full(p, np.inf)
+    se = np.sqrt(np.maximum(var, 0.0)) * scale
     return Fit(
         names,
         _unpack(sol.x * scale, names),
@@ -136,6 +141,29 @@ def fit(problem: Problem, names: tuple[str, ...]) -> Fit:
         p,
         _bic(rss, n, p, problem.ess_ratio),
     )
+
+
+BLOCK_S = 1.0  # the sandwich interval's blocks: longer than the residual's correlation
+
+
+def _block_ids(t: np.ndarray, flight: int) -> np.ndarray:
+    """Rows of one flight in blocks of BLOCK_S (ids unique across flights)."""
+    return flight * 100_000 + np.floor((t - t[0]) / BLOCK_S).astype(int)
+
+
+def block_sandwich(
+    bread: np.ndarray, jac: np.ndarray, resid: np.ndarray, blocks: np.ndarray
+) -> np.ndarray:
+    """The cluster-robust covariance (J'J)^-1 (sum over blocks of s_b s_b') (J'J)^-1, with
+    s_b = J_b' r_b: valid under correlated and misspecified residuals, which the white-noise
+    interval inflated by the effective sample size is not (a model bias of 0.5% in rho
+    otherwise sits 5 intervals away)."""
+    _, inverse = np.unique(blocks, return_inverse=True)
+    scores = np.zeros((inverse.max() + 1, jac.shape[1]))
+    np.add.at(scores, inverse, jac * resid[:, None])
+    g = len(scores)
+    meat = scores.T @ scores * (g / max(g - 1, 1))
+    return bread @ meat @ bread
 
 
 def _bic(rss: float, n: int, p: int, ess_ratio: float) -> float:

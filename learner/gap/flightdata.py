@@ -74,6 +74,17 @@ def differentiate(t: np.ndarray, v: np.ndarray, segment: np.ndarray, dt_s: float
     return out
 
 
+def smooth_positions(p: np.ndarray, segment: np.ndarray, dt_s: float) -> np.ndarray:
+    """Positions through a quadratic Savitzky-Golay filter of SMOOTH_S per segment."""
+    out = p.copy()
+    window = max(5, round(SMOOTH_S / dt_s) | 1)
+    for s in np.unique(segment):
+        idx = np.flatnonzero(segment == s)
+        if len(idx) >= window:
+            out[idx] = savgol_filter(p[idx], window, 2, axis=0)
+    return out
+
+
 def prepare(log: FlightLog, world: World, vehicle: Vehicle) -> FlightData:
     t = log.time_s
     if len(t) < 10:
@@ -86,7 +97,10 @@ def prepare(log: FlightLog, world: World, vehicle: Vehicle) -> FlightData:
     sign = np.sign(np.sum(q_prev * log.quaternion, axis=1))[:, None]
     rotation = quat_to_matrices(q_prev * np.where(sign == 0, 1, sign) + log.quaternion)
     v_mid = 0.5 * (_previous(log.velocity_m_s, new_segment) + log.velocity_m_s)
-    p_mid = 0.5 * (_previous(log.position_m, new_segment) + log.position_m)
+    # distances to surfaces from a smoothed position: the ground effect is steep in height
+    # (1 / z^2), so white position noise near the ground biases it (errors in variables)
+    smooth_p = smooth_positions(log.position_m, segment, dt)
+    p_mid = 0.5 * (_previous(smooth_p, new_segment) + smooth_p)
     measured = log.acceleration_m_s2 is not None
     acc = log.acceleration_m_s2 if measured else differentiate(t, log.velocity_m_s, segment, dt)
     hubs = p_mid[:, None, :] + np.einsum("nij,kj->nki", rotation, vehicle.rotor_positions_body_m())
