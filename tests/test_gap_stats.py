@@ -112,3 +112,29 @@ def test_csv_with_renamed_columns_units_and_ned_frame(tmp_path) -> None:
         read_log(path, mapping)
     with pytest.raises(ConfigError, match=r"units\.time_s"):
         ColumnMapping(units={"time_s": "fortnights"})
+
+
+def test_block_sandwich_interval_matches_the_spread_under_correlated_misfit() -> None:
+    """A slope fitted through a slowly varying misfit (AR(1), phi 0.98): the white-noise
+    standard error is far too small; the 1 s block sandwich is about the true spread."""
+    from scipy.signal import lfilter
+
+    from learner.gap.fit import _block_ids, block_sandwich
+
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 60.0, 0.01)
+    x = np.sin(0.7 * t) + 0.3 * np.sin(3.1 * t)
+    slopes, naive, robust = [], [], []
+    for _ in range(200):
+        e = lfilter([1.0], [1.0, -0.98], rng.normal(0.0, 0.05, len(t)))
+        y = 2.0 * x + e
+        jac = x[:, None]
+        bread = np.linalg.inv(jac.T @ jac)
+        b = float((bread @ jac.T @ y)[0])
+        r = jac[:, 0] * b - y
+        slopes.append(b)
+        naive.append(np.sqrt(bread[0, 0] * (r @ r) / (len(t) - 1)))
+        robust.append(np.sqrt(block_sandwich(bread, jac, r, _block_ids(t, 0))[0, 0]))
+    spread = np.std(slopes)
+    assert np.median(naive) < 0.3 * spread
+    assert 0.75 * spread < np.median(robust) < 1.25 * spread
