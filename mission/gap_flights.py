@@ -64,7 +64,9 @@ def bench_mission(kind: str, seed: int) -> dict[str, Any]:
                 "speed_m_s": speed,
             }
         )
-    if kind == "wall":
+    if kind == "wall":  # the wall stands at y = 0.6 m: every other waypoint on this side
+        for wp in wps:
+            wp["position_m"][1] = min(wp["position_m"][1], 0.3)
         wps[1] = {"position_m": [rng.uniform(-0.5, 0.5), 0.45, 0.5], "hold_s": 1.5,
                   "acceptance_radius_m": 0.05, "speed_m_s": 0.5}  # fmt: skip
     x, y = rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3)

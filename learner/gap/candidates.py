@@ -142,11 +142,14 @@ def world_force(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
         wall = WallEffectParams(gain=float(values["wall_effect"][0]))
         force += wall_force_array(wall, thrust, radius, d.wall_distances_m)
     force += _drag(values, d)
-    if "sensor_latency" in values:  # the accelerometer reports the force of `delay` ago
+    if "sensor_latency" in values:
+        # the accelerometer reports the body-frame specific force of `delay` ago; the log
+        # turns it into the world frame with the current attitude
         delay = float(values["sensor_latency"][0])
-        force = np.column_stack(
-            [np.interp(d.time_s - delay, d.time_s, force[:, i]) for i in range(3)]
-        )
+        body = np.einsum("nji,nj->ni", d.rotation, force)
+        t = d.time_s
+        late = np.column_stack([np.interp(t - delay, t, body[:, i]) for i in range(3)])
+        force = np.einsum("nij,nj->ni", d.rotation, late)
     if "sensor_bias" in values:
         force += vehicle.mass_kg * np.einsum("nij,j->ni", d.rotation, values["sensor_bias"])
     return force
