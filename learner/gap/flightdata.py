@@ -3,6 +3,7 @@ rotor commands and the distances to the nominal world's surfaces, as arrays."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,7 +86,40 @@ def smooth_positions(p: np.ndarray, segment: np.ndarray, dt_s: float) -> np.ndar
     return out
 
 
+CONTACT_MARGIN_M = 0.005  # closer than this to a wall or ceiling: touching it
+
+
+def touching(log: FlightLog, world: World, vehicle: Vehicle) -> np.ndarray:
+    """Rows where the body touches a wall or the ceiling: contact forces no aerodynamic
+    effect explains (a strong wall or ceiling effect pulls the vehicle into contact); the
+    ground is left out already by logging only airborne steps."""
+    half = np.asarray(vehicle.body_size_m) / 2.0
+    walls = wall_distances_m(log.position_m, world.obstacles, 1.0)
+    out = np.min(walls, axis=1) < max(half[0], half[1]) + CONTACT_MARGIN_M
+    if world.ceiling_height_m is not None:
+        out |= log.position_m[:, 2] + half[2] + CONTACT_MARGIN_M > world.ceiling_height_m
+    return out
+
+
+def without_rows(log: FlightLog, drop: np.ndarray) -> FlightLog:
+    keep = ~drop
+
+    def k(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else a[keep]
+
+    return dataclasses.replace(
+        log, time_s=log.time_s[keep], position_m=log.position_m[keep],
+        velocity_m_s=log.velocity_m_s[keep], quaternion=log.quaternion[keep],
+        body_rates_rad_s=log.body_rates_rad_s[keep],
+        rotor_speeds_rad_s=log.rotor_speeds_rad_s[keep],
+        acceleration_m_s2=k(log.acceleration_m_s2), battery_v=k(log.battery_v),
+    )  # fmt: skip
+
+
 def prepare(log: FlightLog, world: World, vehicle: Vehicle) -> FlightData:
+    contact = touching(log, world, vehicle)
+    if contact.any():  # the rows around them start new segments (time gaps)
+        log = without_rows(log, contact)
     t = log.time_s
     if len(t) < 10:
         raise ValueError(f"{log.name}: only {len(t)} rows; a flight log needs at least 10")
