@@ -24,6 +24,7 @@ from autopilot.ground_station import GroundStation, StepInput
 from autopilot.metrics import COLUMNS, flight_metrics, trajectory_sha256
 from autopilot.mission_items import MissionItem
 from autopilot.modes import FlightMode
+from autopilot.online_control import OnlineControl, OnlineOptions
 from autopilot.params import ParamStore
 from autopilot.signing import Signing
 from autopilot.simlink import LinkLost, SimLink, Step
@@ -65,6 +66,7 @@ class AutopilotConfig:
     record_hz: float = 0.0  # > 0: record learning samples at this rate (thesis: 100 Hz)
     stop_after_samples: int | None = None  # end the flight once this many are recorded
     on_sample: Callable[[int], None] | None = None  # told the count of recorded samples
+    online: OnlineOptions = OnlineOptions()  # online learning (GFX_OL_METHOD turns it on)
 
 
 @dataclass
@@ -216,6 +218,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     channels = vehicle.actuator_channels
     n_max = vehicle.max_rotor_speed_rad_s
     tuning = Tuning(config)
+    online = OnlineControl(config.online, config.params, config.network)
+    online.refresh(tuning.model, 0.0)
     rows: list[tuple[float, ...]] = []
     timings: list[float] = []
     speeds = (0.0, 0.0, 0.0, 0.0)
@@ -254,7 +258,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 cmd_state, _ = requests.set_mode(
                     cmd_state, FlightMode.MISSION, t, state.position_m, tuning.commander
                 )
-            tuning.refresh()
+            if tuning.refresh():
+                online.refresh(tuning.model, t)
             cmd = command(
                 cmd_state,
                 tuning.commander,
@@ -266,25 +271,31 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             )
             cmd_state = cmd.state
             airborne = height > resting_height + AIRBORNE_MARGIN_M
+            sample_hz = config.record_hz or online.sample_hz
             if (
-                config.record_hz > 0.0
+                sample_hz > 0.0
                 and t >= next_sample_s
                 and airborne
                 and cmd_state.phase in RECORDED_PHASES
             ):
-                samples.append(learning_sample(t, step, state, height, speeds, vehicle))
-                period = 1.0 / config.record_hz  # on a 100 Hz schedule, 250 Hz steps
+                row = learning_sample(t, step, state, height, speeds, vehicle)
+                online.submit(row)
+                if config.record_hz > 0.0:
+                    samples.append(row)
+                period = 1.0 / sample_hz  # on a 100 Hz schedule, 250 Hz steps
                 next_sample_s = next_sample_s + period if t - next_sample_s < period else t + period
                 if config.on_sample is not None:
                     config.on_sample(len(samples))
                 if (
-                    config.stop_after_samples is not None
+                    config.record_hz > 0.0
+                    and config.stop_after_samples is not None
                     and len(samples) >= config.stop_after_samples
                 ):
                     ended = "enough samples"
                     break
             if cmd.setpoint is not None:
                 t0 = time.perf_counter()
+                online.apply(tuning.model)
                 target = tuning.model.predict(
                     GroundEffectInputs(height, state.velocity_m_s, state.quaternion, speeds)
                 )
@@ -319,6 +330,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         ended = str(lost)
     finally:
         link.close()
+        online_summary = online.close()
         station.save_signing(time.monotonic())
         gcs.close()
     wall = time.perf_counter() - wall0
@@ -346,6 +358,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         unknown=link.unknown,
         gcs=gcs.counters.as_dict(),
         mission_items=len(station.items),
+        **online_summary,
     )
     data = np.asarray(samples, dtype=float) if samples else None
     return Flight(log=log, summary=summary, ended=ended, samples=data)

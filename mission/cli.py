@@ -9,6 +9,7 @@ from pathlib import Path
 
 from mission import commands
 from mission.mission_cli import add_mission_parser
+from mission.online_cli import add_online_learn_parsers, add_online_options
 from simbridge.config import ConfigError
 
 DEFAULT_LOGS = Path("logs")
@@ -180,6 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--origin", metavar="LAT,LON,ALT", help="geodetic origin of the local frame")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
+    add_online_options(p)
     p.set_defaults(func=commands.cmd_autopilot)
 
     p = sub.add_parser("fly", help="fly a mission: simulator and autopilot processes in lockstep")
@@ -199,6 +201,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--identity", choices=["px4", "ardupilot"], default="px4")
     p.add_argument("-v", "--verbose", action="store_true", help="print the vehicle's messages")
+    p.add_argument(
+        "--param",
+        action="append",
+        metavar="NAME=VALUE",
+        default=[],
+        help="a vehicle parameter for this flight, repeatable (e.g. GFX_OL_LR=0.01)",
+    )
+    add_online_options(p)
     p.set_defaults(func=commands.cmd_fly)
 
     p = sub.add_parser(
@@ -247,6 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--seed", type=int, default=0, help="first trial seed")
     e.add_argument("--json", action="store_true")
     e.set_defaults(func=commands.cmd_learn)
+    add_online_learn_parsers(learn, commands.cmd_learn)
     pl = learn.add_parser("plot", help="true against predicted f_ge,z over altitude")
     pl.add_argument("--network", default="rho1", help="model file or packaged name")
     pl.add_argument("--rho-list", default="1,2", help="rho values to draw (default: 1,2)")

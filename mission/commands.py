@@ -82,7 +82,9 @@ def _param_overrides(args: argparse.Namespace) -> dict[str, float]:
         out["GFX_GE_MODEL"] = float(MODEL_NAMES.index(model))
     if getattr(args, "rho", None) is not None:
         out["GFX_GE_RHO"] = args.rho
-    return out
+    from mission.online_cli import online_overrides
+
+    return out | online_overrides(args)
 
 
 def cmd_autopilot(args: argparse.Namespace) -> int:
@@ -95,6 +97,7 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
     from autopilot.signing import Signing
     from autopilot.simlink import LinkLost, parse_url
     from mission.formats import load_mission_file
+    from mission.online_cli import online_options
     from simbridge.vehicle import load_vehicle
     from simbridge.world import load_world
 
@@ -134,6 +137,7 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
         gcs_urls=gcs_urls,
         signing=Signing(args.signing_key_file) if args.signing_key_file else None,
         should_stop=lambda: bool(stop),
+        online=online_options(args, reproducible=args.auto_start),
     )
 
     def on_signal(signum: int, frame: object) -> None:
@@ -167,7 +171,10 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
 
 def cmd_fly(args: argparse.Namespace) -> int:
     from mission.fly import describe, fly
+    from mission.online_cli import online_overrides, pass_through
 
+    online_overrides(args)  # refuse --online without --model neural before starting anything
+    extra = pass_through(args) + [a for p in args.param for a in ("--param", p)]
     speedup = "max" if args.speedup is None else f"{args.speedup:g}"
     summary = fly(
         args.mission,
@@ -181,6 +188,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
         via_gcs=not args.no_gcs,
         identity=args.identity,
         say=print if args.verbose else (lambda text: None),
+        extra=tuple(extra),
     )
     print(json.dumps(summary) if args.json else describe(summary))
     return 0 if summary["landed"] else 1
@@ -238,6 +246,10 @@ def cmd_learn(args: argparse.Namespace) -> int:
         for kind, path in paths.items():
             print(f"{kind}: {path}")
         return 0
+    if args.action in ("memory", "online-eval"):
+        from mission.online_cli import cmd_online_learn
+
+        return cmd_online_learn(args)
     if args.action == "evaluate":
         from mission.trials import evaluate_models
 

@@ -60,6 +60,7 @@ def fly(
     via_gcs: bool = True,
     identity: str = "px4",
     say: Callable[[str], None] = lambda text: None,
+    extra: tuple[str, ...] = (),
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line.
 
@@ -77,6 +78,7 @@ def fly(
         options += ["--trajectory", str(trajectory)]
     if network is not None:
         options += ["--network", str(network)]
+    options += extra  # e.g. --online METHOD, --param NAME=VALUE
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
     sim, port = start_sim(resolve_world_path(world), speedup=speedup, start=start)
