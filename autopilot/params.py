@@ -71,7 +71,7 @@ class OnlineParams:
     learning_rate: float = param(3e-3, lo=1e-7, hi=1.0, doc="Adam step size")
     penalty: float = param(1.0, lo=0.0, hi=1e6, doc="lambda of constraint, margin, ewc")
     margin: float = param(0.02, lo=0.0, hi=10.0, doc="free deviation per weight (margin)")
-    forgetting: float = param(0.99, lo=0.5, hi=1.0, doc="RLS forgetting factor per sample")
+    forgetting: float = param(0.95, lo=0.5, hi=1.0, doc="RLS forgetting factor per sample")
     pause: int = param(0, lo=0, hi=1, doc="1: samples are ignored, the weights stay")
     reset: int = param(0, lo=0, hi=1, doc="1: back to the offline weights (then reads 0 again)")
 

@@ -7,6 +7,7 @@ import math
 import sys
 from pathlib import Path
 
+from learner.online.settings import METHODS
 from mission import commands
 from mission.mission_cli import add_mission_parser
 from mission.online_cli import add_online_learn_parsers, add_online_options
@@ -150,6 +151,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = bench_sub.add_parser("model", help="the ground-effect network's inference time")
     b.add_argument("--network", default="rho2", help="model file or packaged name")
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(func=commands.cmd_bench)
+    b = bench_sub.add_parser("online", help="controller latency and rtf, learner off and on")
+    b.add_argument(
+        "--method", default="naive", choices=METHODS, help="online method (default: naive)"
+    )
+    b.add_argument("--repeat", type=int, default=3, help="off/on pairs (default: 3)")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=commands.cmd_bench)
     b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")

@@ -277,6 +277,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
             json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
         )
         return 0
+    if args.target == "online":
+        from mission.online_bench import bench_online
+
+        if args.repeat < 1:
+            raise ConfigError(f"--repeat: {args.repeat} must be at least 1")
+        result = bench_online(args.method, args.repeat)
+        print(
+            json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
+        )
+        return 0
     if args.target == "sitl":
         from mission.bench import bench_sitl
 

@@ -79,6 +79,21 @@ def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) ->
     m.add_argument("--samples", type=int, default=2048, help="samples kept (default: 2048)")
     m.add_argument("--seed", type=int, default=0)
     m.set_defaults(func=func)
+    e = learn.add_parser(
+        "online-eval", help="thesis experiments 4.3 and 4.4: online methods over seeded trials"
+    )
+    e.add_argument("--trials", type=int, default=10, help="seeded trials per condition")
+    e.add_argument("--seed", type=int, default=0, help="first trial seed")
+    e.add_argument("--methods", default=",".join(METHODS), help="comma-separated methods")
+    e.add_argument("--rho", default="2,0.5", help="rho_sim of the adaptation worlds")
+    e.add_argument("--network", default="rho1", help="the offline network (default: rho1)")
+    e.add_argument("--hold-s", type=float, default=10.0, help="hold 3 cm above ground this long")
+    e.add_argument("--no-remember", action="store_true", help="skip experiment 4.4")
+    e.add_argument(
+        "--param", action="append", default=[], metavar="NAME=VALUE", help="e.g. GFX_OL_LR=0.01"
+    )
+    e.add_argument("--json", action="store_true")
+    e.set_defaults(func=func)
 
 
 def cmd_online_learn(args: argparse.Namespace) -> int:
@@ -92,4 +107,35 @@ def cmd_online_learn(args: argparse.Namespace) -> int:
         memory.header["sources"] = [str(p) for p in args.data]
         print(save_memory(args.out, memory))
         return 0
-    raise ConfigError(f"unknown action {args.action!r}")
+    import json
+
+    from mission.online_eval import run_online_eval
+
+    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    for m in methods:
+        if m not in METHODS:
+            raise ConfigError(f"--methods: unknown method {m!r}; choose from {', '.join(METHODS)}")
+    try:
+        rhos = tuple(float(r) for r in args.rho.split(","))
+    except ValueError:
+        raise ConfigError(
+            f"--rho: expected numbers separated by commas, got {args.rho!r}"
+        ) from None
+    if not all(0 < r <= 50 for r in rhos):
+        raise ConfigError(f"--rho: each rho must be in (0, 50], got {args.rho!r}")
+    if args.trials < 1:
+        raise ConfigError(f"--trials: {args.trials} must be at least 1")
+    if not 1.0 <= args.hold_s <= 120.0:
+        raise ConfigError(f"--hold-s: {args.hold_s:g} is outside the allowed range [1, 120] s")
+    result = run_online_eval(
+        list(range(args.seed, args.seed + args.trials)),
+        methods,
+        rhos,
+        args.network,
+        args.hold_s,
+        remember=not args.no_remember,
+        params=tuple(args.param),
+    )
+    if args.json:
+        print(json.dumps(result))
+    return 0

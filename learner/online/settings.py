@@ -37,7 +37,7 @@ class OnlineSettings:
     )
     margin: float = param(0.02, lo=0.0, hi=10.0, doc="free deviation of each weight (margin)")
     forgetting: float = param(
-        0.99, lo=0.5, hi=1.0, doc="RLS forgetting factor per sample (1: remember all)"
+        0.95, lo=0.5, hi=1.0, doc="RLS forgetting factor per sample (1: remember all)"
     )
     rls_initial_covariance: float = param(
         1.0, lo=0.0, hi=1e6, lo_open=True, doc="RLS: the initial covariance P0 = p0 I"
