@@ -68,7 +68,7 @@ class OnlineParams:
     method: int = param(
         0, lo=0, hi=6, doc="0 off, 1 naive, 2 constraint, 3 margin, 4 ewc, 5 replay, 6 rls"
     )
-    learning_rate: float = param(3e-3, lo=1e-7, hi=1.0, doc="Adam step size")
+    learning_rate: float = param(1e-3, lo=1e-7, hi=1.0, doc="Adam step size")
     penalty: float = param(1.0, lo=0.0, hi=1e6, doc="lambda of constraint, margin, ewc")
     margin: float = param(0.02, lo=0.0, hi=10.0, doc="free deviation per weight (margin)")
     forgetting: float = param(0.95, lo=0.5, hi=1.0, doc="RLS forgetting factor per sample")

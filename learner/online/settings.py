@@ -29,9 +29,9 @@ class OnlineSettings:
     method: str = "naive"
     batch_size: int = param(64, lo=8, hi=4096, doc="new samples per update (thesis: 64)")
     learning_rate: float = param(
-        3e-3, lo=0.0, hi=1.0, lo_open=True, doc="Adam step size of the gradient methods"
+        1e-3, lo=0.0, hi=1.0, lo_open=True, doc="Adam step size of the gradient methods"
     )
-    steps: int = param(20, lo=1, hi=1000, doc="Adam steps on each batch")
+    steps: int = param(10, lo=1, hi=1000, doc="Adam steps on each batch")
     penalty: float = param(
         1.0, lo=0.0, hi=1e6, doc="lambda: weight of the constraint, margin or EWC penalty"
     )
