@@ -1,5 +1,6 @@
 """The command-line side of online learning: `--online METHOD` and its companions for
-`groundfx autopilot`, `groundfx fly` and `groundfx sitl`."""
+`groundfx autopilot` and `groundfx fly` (with a ground station, GFX_OL_METHOD and the other
+GFX_OL_* parameters do the same in flight), and `groundfx learn memory|online-eval`."""
 
 from __future__ import annotations
 
@@ -61,7 +62,7 @@ def online_options(args: argparse.Namespace, reproducible: bool) -> object:
 
 
 def pass_through(args: argparse.Namespace) -> list[str]:
-    """The online options again, for the autopilot process that `fly` and `sitl` start."""
+    """The online options again, for the autopilot process that `fly` starts."""
     out: list[str] = []
     if getattr(args, "online", None):
         out += ["--online", args.online]
