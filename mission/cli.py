@@ -11,6 +11,8 @@ from learner.online.settings import METHODS
 from mission import commands
 from mission.mission_cli import add_mission_parser
 from mission.online_cli import add_online_learn_parsers, add_online_options
+from mission.recordings import add_record_options
+from mission.review import add_review_parser
 from simbridge.config import ConfigError
 
 DEFAULT_LOGS = Path("logs")
@@ -162,6 +164,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=commands.cmd_bench)
     b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")
     b.add_argument("--world", default="default")
+    b.add_argument(
+        "--repeat", type=int, default=3, help="flights with recording off and on each (default: 3)"
+    )
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=commands.cmd_bench)
 
@@ -190,6 +195,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
     add_online_options(p)
+    add_record_options(p, world=True)
     p.set_defaults(func=commands.cmd_autopilot)
 
     p = sub.add_parser("fly", help="fly a mission: simulator and autopilot processes in lockstep")
@@ -217,7 +223,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="a vehicle parameter for this flight, repeatable (e.g. GFX_OL_LR=0.01)",
     )
     add_online_options(p)
+    add_record_options(p)
     p.set_defaults(func=commands.cmd_fly)
+
+    add_review_parser(sub)
 
     p = sub.add_parser(
         "sitl",
@@ -236,6 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
     _model_options(p, rho_default=None, model_default=None)
     _gcs_options(p)
     p.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
+    add_record_options(p)
     p.set_defaults(func=commands.cmd_sitl)
 
     add_mission_parser(sub)

@@ -25,7 +25,15 @@ def bench_online(method: str = "naive", repeat: int = 3, world: str = "rho2") ->
         for kind in ("off", "on"):
             extra = () if kind == "off" else ("--online", method, "--online-async")
             runs[kind].append(
-                fly(BENCH_MISSION, world, "neural", network="rho1", via_gcs=False, extra=extra)
+                fly(
+                    BENCH_MISSION,
+                    world,
+                    "neural",
+                    network="rho1",
+                    via_gcs=False,
+                    record=False,
+                    extra=extra,
+                )
             )
 
     def median(kind: str, key: str) -> float:

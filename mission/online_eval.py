@@ -59,6 +59,7 @@ def _hold_error(
         start=start,
         network=network,
         via_gcs=False,
+        record=False,
         extra=tuple(extra),
     )
     error = summary.get("hold_z_rms_error_m")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -188,6 +189,7 @@ def test_online_parameters_have_ranges_and_the_options_clear_errors(tmp_path):
 def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_paused(tmp_path):
     import yaml
 
+    from autopilot.recording import read_recording
     from mission.fly import fly
     from mission.trials import landing_trial
 
@@ -196,13 +198,20 @@ def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_pau
     mission = tmp_path / "landing.yaml"
     mission.write_text(yaml.safe_dump(data))
 
-    def flight(*extra: str) -> dict:
+    def flight(*extra: str, record: bool | Path = False) -> dict:
         return fly(
-            mission, "rho2", "neural", network="rho1", start=start, via_gcs=False, extra=extra
+            mission,
+            "rho2",
+            "neural",
+            network="rho1",
+            start=start,
+            via_gcs=False,
+            record=record,
+            extra=extra,
         )
 
-    saved = tmp_path / "adapted.npz"
-    a = flight("--online", "rls", "--save-model", str(saved))
+    saved, rrd = tmp_path / "adapted.npz", tmp_path / "a.rrd"
+    a = flight("--online", "rls", "--save-model", str(saved), record=rrd)
     b = flight("--online", "rls")
     assert a["landed"] and a["online_mode"] == "deterministic"
     assert a["online_version"] == a["online_accepted"] > 3
@@ -215,5 +224,9 @@ def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_pau
     assert adapted.header["online"]["version"] == a["online_version"]
     assert not np.array_equal(adapted.weights[-1], BASE.weights[-1])
     assert np.array_equal(adapted.weights[0], BASE.weights[0])  # rls: the last layer only
+    # the recording has the learner's loss and the version the controller used
+    _, versions = read_recording(rrd).scalars("plots/learner/version")
+    assert versions[-1, 0] == a["online_version"] and np.all(np.diff(versions[:, 0]) >= 0)
+    assert len(read_recording(rrd).scalars("plots/learner/loss")[0]) == a["online_updates"]
     paused = flight("--online", "naive", "--param", "GFX_OL_PAUSE=1")
     assert paused["online_version"] == 0 and paused["online_ignored_paused"] > 100
