@@ -9,6 +9,7 @@ may change in flight; GFX_OL_PAUSE pauses, GFX_OL_RESET = 1 resets to the offlin
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,12 +17,16 @@ from typing import Any
 import numpy as np
 
 from autopilot.ground_models import GroundEffectModel, default_network
-from autopilot.online_learner import SAMPLE_HZ, OnlineLearner, Report
 from autopilot.params import ONLINE_METHODS, ParamStore
 from learner.dataset import COLUMNS, FEATURES, TARGETS
 from learner.online.memory import Memory, load_memory, memory_path_for
-from learner.online.settings import NEEDS_MEMORY, OnlineSettings
+from learner.online.names import NEEDS_MEMORY
 from simbridge.config import ConfigError
+
+# torch, and the learner with it, load only when learning is on: a flight without it
+# connects to the simulator as soon as before
+SAMPLE_HZ = 100.0  # thesis: samples at 100 Hz, an update per 64 (about 1.6 per second)
+Report = Callable[[float, float | None, int], None]  # (sim time, loss, version)
 
 _NAMES = list(COLUMNS)
 FEATURE_COLUMNS = np.array([_NAMES.index(f) for f in FEATURES])
@@ -33,17 +38,19 @@ class OnlineOptions:
     deterministic: bool = True  # updates inside the control step: same sim times every run
     save_path: Path | None = None  # the adapted model at the end of the flight
     on_report: Report | None = None  # (sim time, loss, version) per update: the recorder
-    base: OnlineSettings = OnlineSettings()  # the settings the parameters do not cover
+    base: Any = None  # OnlineSettings the parameters do not cover (None: the defaults)
 
 
-def settings_from(params: ParamStore, base: OnlineSettings) -> OnlineSettings | None:
-    """The online settings the parameters ask for; None when learning is off."""
+def settings_from(params: ParamStore, base: Any = None) -> Any:
+    """The online settings (OnlineSettings) the parameters ask for; None when learning is off."""
     p = params.online()
     method = ONLINE_METHODS[p.method]
     if method == "off":
         return None
+    from learner.online.settings import OnlineSettings
+
     return dataclasses.replace(
-        base,
+        base if base is not None else OnlineSettings(),
         method=method,
         learning_rate=p.learning_rate,
         penalty=p.penalty,
@@ -67,7 +74,7 @@ class OnlineControl:
         self.options = options
         self.params = params
         self.network = network
-        self.learner: OnlineLearner | None = None
+        self.learner: Any = None  # autopilot.online_learner.OnlineLearner, once learning
         self.active = False
         self.errors: list[str] = []
         settings = settings_from(params, options.base)
@@ -93,6 +100,8 @@ class OnlineControl:
         p = self.params.online()
         try:
             if self.learner is None:
+                from autopilot.online_learner import OnlineLearner
+
                 memory = find_memory(self.network, self.params.model()[1])
                 self.learner = OnlineLearner(
                     model.net,  # type: ignore[attr-defined]

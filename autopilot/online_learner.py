@@ -27,7 +27,6 @@ from learner.online.session import OnlineSession
 from learner.online.settings import OnlineSettings
 from learner.online.snapshot import Snapshot
 
-SAMPLE_HZ = 100.0  # thesis: samples at 100 Hz, an update per 64 (about 1.6 per second)
 QUEUE_SIZE = 512  # samples: 5 s of slack before dropping
 Report = Callable[[float, float | None, int], None]  # (sim time, loss, version)
 

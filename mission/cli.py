@@ -7,7 +7,7 @@ import math
 import sys
 from pathlib import Path
 
-from learner.online.settings import METHODS
+from learner.online.names import METHODS
 from mission import commands
 from mission.mission_cli import add_mission_parser
 from mission.online_cli import add_online_learn_parsers, add_online_options

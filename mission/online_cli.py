@@ -8,7 +8,7 @@ import argparse
 from pathlib import Path
 
 from autopilot.params import ONLINE_METHODS
-from learner.online.settings import METHODS
+from learner.online.names import METHODS
 from simbridge.config import ConfigError
 
 

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from learner.online.settings import METHODS, PROTECTING
+from learner.online.names import METHODS, PROTECTING
 from learner.stats import gap_closed, mean_ci95
 from mission.fly import fly
 from mission.gather import _with_rho

@@ -14,11 +14,10 @@ import dataclasses
 from dataclasses import dataclass
 
 from learner.network import DEFAULT_LAYER_BOUND
+from learner.online.names import METHODS, NEEDS_MEMORY, PROTECTING
 from simbridge.config import ConfigError, param, range_text
 
-METHODS = ("naive", "constraint", "margin", "ewc", "replay", "rls")
-PROTECTING = ("constraint", "margin", "ewc", "replay")  # keep the offline weights in view
-NEEDS_MEMORY = ("ewc", "replay")  # need stored offline samples
+__all__ = ["METHODS", "NEEDS_MEMORY", "PROTECTING", "OnlineSettings", "check_settings"]
 
 
 @dataclass(frozen=True)
