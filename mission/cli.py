@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from mission import commands
+from mission.experiments.cli import add_experiment_parser
 from mission.mission_cli import add_mission_parser
 from simbridge.config import ConfigError
 
@@ -221,6 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=commands.cmd_sitl)
 
     add_mission_parser(sub)
+    add_experiment_parser(sub)
 
     p = sub.add_parser("learn", help="gather data, train the ground-effect network, plot it")
     learn = p.add_subparsers(dest="action", required=True, metavar="ACTION")

@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +60,7 @@ def fly(
     via_gcs: bool = True,
     identity: str = "px4",
     say: Callable[[str], None] = lambda text: None,
+    autopilot_options: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line.
 
@@ -77,6 +78,7 @@ def fly(
         options += ["--trajectory", str(trajectory)]
     if network is not None:
         options += ["--network", str(network)]
+    options += autopilot_options  # e.g. the experiments' --online METHOD
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
     sim, port = start_sim(resolve_world_path(world), speedup=speedup, start=start)
