@@ -133,8 +133,8 @@ def _offline_vs_baseline() -> Experiment:
         "how close does it come to the analytic expert, in the rho_sim = 2 world?",
         (
             _c("none", "no model", BASELINE_TRIALS, dataclasses.replace(w, model="none")),
-            _c("analytic", "analytic (true rho)", 6, dataclasses.replace(w, model="analytic")),
-            _c("neural", "neural rho2 (offline)", 6, dataclasses.replace(w, network="rho2")),
+            _c("analytic", "analytic (true rho)", 4, dataclasses.replace(w, model="analytic")),
+            _c("neural", "neural rho2 (offline)", 5, dataclasses.replace(w, network="rho2")),
         ),
         (
             Expectation("neural", "none", "lower", "the offline network beats the baseline"),
@@ -150,9 +150,9 @@ def _several_rho() -> Experiment:
         g = f"rho_sim {rho:g}"
         f = Flight(rho_sim=rho)
         conditions += [
-            _c(f"multi@{rho:g}", f"rho 1+2 net at {rho:g} ({seen})", 4,
+            _c(f"multi@{rho:g}", f"rho 1+2 net at {rho:g} ({seen})", 3,
                dataclasses.replace(f, network=MULTI_NETWORK), group=g),
-            _c(f"single@{rho:g}", f"{NEAREST[rho]} net at {rho:g}", 4,
+            _c(f"single@{rho:g}", f"{NEAREST[rho]} net at {rho:g}", 3,
                dataclasses.replace(f, network=NEAREST[rho]), group=g),
         ]  # fmt: skip
     return Experiment(
@@ -240,7 +240,7 @@ def _flight_test() -> Experiment:
         "then a landing, in the rho_sim = 2 world.",
         (
             _c("none", "no model", BASELINE_TRIALS, dataclasses.replace(f, model="none")),
-            _c("analytic", "analytic", 3, dataclasses.replace(f, model="analytic")),
+            _c("analytic", "analytic", 2, dataclasses.replace(f, model="analytic")),
             _c("neural", "neural rho2", 3, dataclasses.replace(f, network="rho2")),
         ),
         (Expectation("neural", "none", "lower", "the network helps over a whole mission"),),
@@ -255,15 +255,18 @@ def _size_and_obstacles() -> Experiment:
         conditions += [
             _c(f"none@{rho:g}", f"no model at {rho:g}", BASELINE_TRIALS,
                dataclasses.replace(f, model="none"), group=g),
-            _c(f"neural@{rho:g}", f"{NEAREST[rho]} net at {rho:g}", 3,
+            _c(f"neural@{rho:g}", f"{NEAREST[rho]} net at {rho:g}", 2,
                dataclasses.replace(f, network=NEAREST[rho]), group=g),
         ]  # fmt: skip
     for kind in ("box", "step", "wall"):
         f = Flight(mission=kind, world="obstacles")
+        if kind != "wall":  # beside the wall the ground is open: compare with neural@1
+            conditions.append(
+                _c(f"none@{kind}", f"no model, {kind}", BASELINE_TRIALS,
+                   dataclasses.replace(f, model="none"), group=kind)
+            )  # fmt: skip
         conditions += [
-            _c(f"none@{kind}", f"no model, {kind}", BASELINE_TRIALS,
-               dataclasses.replace(f, model="none"), group=kind),
-            _c(f"analytic@{kind}", f"analytic, {kind}", 3,
+            _c(f"analytic@{kind}", f"analytic, {kind}", 2,
                dataclasses.replace(f, model="analytic"), group=kind),
             _c(f"neural@{kind}", f"rho1 net, {kind}", 3,
                dataclasses.replace(f, network="rho1"), group=kind),
@@ -278,7 +281,7 @@ def _size_and_obstacles() -> Experiment:
             Expectation("none@1", "none@4", "lower", "a larger rho, a larger baseline error"),
             Expectation("neural@box", "none@box", "lower", "the network helps on a box"),
             Expectation("neural@step", "none@step", "lower", "the network helps on a step"),
-            Expectation("neural@wall", "none@wall", "lower", "the network helps by a wall"),
+            Expectation("neural@wall", "neural@1", "similar", "a wall beside does not spoil it"),
         ),
     )
 
