@@ -174,8 +174,9 @@ def test_a_killed_campaign_resumes_where_it_stopped(
         f.write('{"id": "' + TINY[1].id + '", "fli')  # the second trial was being written
     results = campaign.run_trials(TINY, tmp_path, {}, workers=1, progress=False)
     lines = path.read_text().splitlines()
-    assert len(lines) == 3  # only the torn trial was flown again
+    assert len(lines) == 3  # only the torn trial was flown again, on a line of its own
     assert json.loads(lines[-1])["id"] == TINY[1].id
+    assert sorted(campaign.load_results(path)) == sorted(t.id for t in TINY)
     # flights are deterministic: the resumed trial gives the result the pool had
     assert _deterministic(results[TINY[1].id]) == _deterministic(pool_results[TINY[1].id])
 

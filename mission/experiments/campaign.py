@@ -42,9 +42,15 @@ def load_results(path: Path) -> dict[str, dict[str, Any]]:
 
 
 def append_result(path: Path, record: dict[str, Any]) -> None:
-    """One line per trial, on disk before the next trial is counted."""
+    """One line per trial, on disk before the next trial is counted; after a torn last line
+    (a campaign killed while writing) on a line of its own."""
+    torn = False
+    if path.exists() and path.stat().st_size > 0:
+        with path.open("rb") as f:
+            f.seek(-1, os.SEEK_END)
+            torn = f.read(1) != b"\n"
     with path.open("a") as f:
-        f.write(json.dumps(record) + "\n")
+        f.write(("\n" if torn else "") + json.dumps(record) + "\n")
         f.flush()
         os.fsync(f.fileno())
 
