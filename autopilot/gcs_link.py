@@ -58,6 +58,11 @@ class Counters:
     def dropped(self) -> int:
         return self.malformed + self.unknown + self.rejected + self.wrong_target
 
+    def recorded(self) -> tuple[int, int, int]:
+        """(received, dropped, rejected) for the recording: dropped never reached a handler;
+        rejected were well-formed requests refused."""
+        return (self.received, self.dropped, self.invalid)
+
     def as_dict(self) -> dict[str, int]:
         return {
             "received": self.received,

@@ -280,11 +280,11 @@ class GroundStation:
             if p[0] == 1.0:
                 cmd, verdict = requests.arm(cmd, t, position, self._not_ready(cmd, inp), force)
                 if verdict.accepted:
-                    self.on_event(t, "armed")
+                    self.on_event(t, "armed by the ground station")
             elif p[0] == 0.0:
                 cmd, verdict = requests.disarm(cmd, t, force)
                 if verdict.accepted:
-                    self.on_event(t, "disarmed")
+                    self.on_event(t, "disarmed by the ground station")
             else:
                 verdict = requests.Verdict(DENIED, f"ARM_DISARM param1 {p[0]:g}: expected 0 or 1")
         elif c == mav.MAV_CMD_NAV_TAKEOFF:

@@ -7,6 +7,7 @@ sensors' time is the only clock. The loop is the edge; every decision is a pure 
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -25,6 +26,7 @@ from autopilot.metrics import COLUMNS, flight_metrics, trajectory_sha256
 from autopilot.mission_items import MissionItem
 from autopilot.modes import FlightMode
 from autopilot.params import ParamStore
+from autopilot.recorder import RecordOptions, open_recorder
 from autopilot.signing import Signing
 from autopilot.simlink import LinkLost, SimLink, Step
 from simbridge.frames import (
@@ -65,6 +67,7 @@ class AutopilotConfig:
     record_hz: float = 0.0  # > 0: record learning samples at this rate (thesis: 100 Hz)
     stop_after_samples: int | None = None  # end the flight once this many are recorded
     on_sample: Callable[[int], None] | None = None  # told the count of recorded samples
+    record: RecordOptions | None = None  # the flight's rerun recording; None: off
 
 
 @dataclass
@@ -226,10 +229,25 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     ended = "landed"
     samples: list[tuple[float, ...]] = []
     next_sample_s = 0.0
-    on_event = config.on_event or (lambda t, text: None)
+    # The recorder first: the simulator's clock starts when the link connects.
+    recorder = open_recorder(config.record, vehicle, MODES)
+    user_on_event = config.on_event or (lambda t, text: None)
+
+    def on_event(t: float, text: str) -> None:
+        user_on_event(t, text)
+        recorder.event(text, "WARN" if text.startswith("failsafe") else "INFO", t)
+
     gcs = GcsLink(list(config.gcs_urls), config.signing)
     station = GroundStation(gcs, config.params, config.identity, config.origin, on_event)
-    link = SimLink(config.sim_url, timeout_s=config.link_timeout_s)
+    try:
+        link = SimLink(config.sim_url, timeout_s=config.link_timeout_s)
+    except LinkLost as lost:
+        recorder.close(str(lost))
+        gcs.close()
+        raise
+    recorder.watch_counters("sim", link.counters)
+    recorder.watch_counters("gcs", gcs.counters.recorded)
+    drawn_plan: tuple | None = None
     wall0 = time.perf_counter()
     try:
         while True:
@@ -290,14 +308,19 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 )
                 rotor_thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in speeds)
                 ge = fixed_point_step(ge, target, rotor_thrust)
-                speeds = control(
-                    state, cmd.setpoint, ge, vehicle, tuning.controller
-                ).rotor_speeds_rad_s
+                output = control(state, cmd.setpoint, ge, vehicle, tuning.controller)
+                speeds = output.rotor_speeds_rad_s
                 timings.append(time.perf_counter() - t0)
             else:
-                speeds, ge = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+                speeds, ge, output = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), None
             link.send(t_us, tuple(n / n_max for n in speeds), channels, cmd.armed)
             station.after_step(cmd_state, inp, cmd.reached, cmd.events)
+            if cmd_state.plan is not drawn_plan:
+                drawn_plan = cmd_state.plan
+                recorder.mission(cmd_state.plan, state.position_m, cmd_state.home_m, t)
+            recorder.step(
+                t, step, state, height, cmd_state.phase, cmd.armed, cmd.setpoint, ge, speeds, output
+            )
             zd = cmd.setpoint.position_m[2] if cmd.setpoint is not None else math.nan
             p, v = state.position_m, state.velocity_m_s
             rows.append(
@@ -321,6 +344,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         link.close()
         station.save_signing(time.monotonic())
         gcs.close()
+        # an exception on its way out (Ctrl-C, SIGTERM) ended the flight, not `ended`
+        recorder.close(ended if sys.exc_info()[0] is None else "interrupted")
     wall = time.perf_counter() - wall0
     log = np.asarray(rows, dtype=float).reshape(-1, len(COLUMNS))
     summary: dict[str, Any] = {"ended": ended, "landed": ended == "landed"}
@@ -347,5 +372,6 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         gcs=gcs.counters.as_dict(),
         mission_items=len(station.items),
     )
+    summary.update(recorder.stats())
     data = np.asarray(samples, dtype=float) if samples else None
     return Flight(log=log, summary=summary, ended=ended, samples=data)

@@ -68,6 +68,7 @@ class SimLink:
             PacketSequence(),
         )
         self._controls = [0.0] * 16
+        self.received = 0  # messages decoded
 
     @property
     def malformed(self) -> int:
@@ -76,6 +77,11 @@ class SimLink:
     @property
     def unknown(self) -> int:
         return self._reader.unknown
+
+    def counters(self) -> tuple[int, int, int]:
+        """(received, dropped, rejected) for the recording: dropped are the malformed and the
+        unknown; the simulator link rejects nothing it can decode."""
+        return (self.received, self._reader.malformed + self._reader.unknown, 0)
 
     def receive_step(self) -> Step:
         new: set[str] = set()
@@ -101,7 +107,9 @@ class SimLink:
                 ) from None
             if not data:
                 raise LinkLost("lost the simulator link: it closed the connection")
-            self._queue.extend(self._reader.feed(data))
+            frames = self._reader.feed(data)
+            self.received += len(frames)
+            self._queue.extend(frames)
 
     def _poll(self) -> bytes | None:
         """Busy-poll for up to SPIN_S before sleeping in the kernel: the simulator's step

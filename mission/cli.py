@@ -10,6 +10,8 @@ from pathlib import Path
 from mission import commands
 from mission.experiments.cli import add_experiment_parser
 from mission.mission_cli import add_mission_parser
+from mission.recordings import add_record_options
+from mission.review import add_review_parser
 from simbridge.config import ConfigError
 
 DEFAULT_LOGS = Path("logs")
@@ -154,6 +156,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=commands.cmd_bench)
     b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")
     b.add_argument("--world", default="default")
+    b.add_argument(
+        "--repeat", type=int, default=3, help="flights with recording off and on each (default: 3)"
+    )
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=commands.cmd_bench)
 
@@ -181,6 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--origin", metavar="LAT,LON,ALT", help="geodetic origin of the local frame")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
+    add_record_options(p, world=True)
     p.set_defaults(func=commands.cmd_autopilot)
 
     p = sub.add_parser("fly", help="fly a mission: simulator and autopilot processes in lockstep")
@@ -200,7 +206,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--identity", choices=["px4", "ardupilot"], default="px4")
     p.add_argument("-v", "--verbose", action="store_true", help="print the vehicle's messages")
+    add_record_options(p)
     p.set_defaults(func=commands.cmd_fly)
+
+    add_review_parser(sub)
 
     p = sub.add_parser(
         "sitl",
@@ -219,6 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
     _model_options(p, rho_default=None, model_default=None)
     _gcs_options(p)
     p.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
+    add_record_options(p)
     p.set_defaults(func=commands.cmd_sitl)
 
     add_mission_parser(sub)

@@ -86,15 +86,19 @@ def _param_overrides(args: argparse.Namespace) -> dict[str, float]:
 
 
 def cmd_autopilot(args: argparse.Namespace) -> int:
+    import dataclasses
+
     import numpy as np
 
     from autopilot.metrics import COLUMNS
     from autopilot.mission_items import Home
     from autopilot.params import ParamStore
+    from autopilot.recorder import RecordOptions
     from autopilot.runner import AutopilotConfig, fly_mission
     from autopilot.signing import Signing
     from autopilot.simlink import LinkLost, parse_url
     from mission.formats import load_mission_file
+    from mission.recordings import record_path
     from simbridge.vehicle import load_vehicle
     from simbridge.world import load_world
 
@@ -141,6 +145,19 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
+    recording = record_path(args, params.model()[0])
+    if recording is not None:
+        info = {
+            "mission": str(args.mission),
+            "model": params.model()[0],
+            "rho": params.model()[1],
+            "network": args.network,
+            "world": args.record_world,
+            "sim": args.sim,
+            "identity": args.identity,
+        }
+        world = load_world(args.record_world) if args.record_world else None
+        config = dataclasses.replace(config, record=RecordOptions(recording, world, info))
     try:
         flight = fly_mission(config)
     except LinkLost as lost:
@@ -149,7 +166,9 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
     if args.trajectory:
         args.trajectory.parent.mkdir(parents=True, exist_ok=True)
         np.savez(args.trajectory, log=flight.log, columns=np.array(COLUMNS))
-    summary = dict(flight.summary, rho=params.model()[1])
+    summary = dict(
+        flight.summary, rho=params.model()[1], recording=str(recording) if recording else None
+    )
     if args.json:
         print(json.dumps(summary), flush=True)
     else:
@@ -181,6 +200,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
         via_gcs=not args.no_gcs,
         identity=args.identity,
         say=print if args.verbose else (lambda text: None),
+        record=False if args.no_record else (args.record or True),
     )
     print(json.dumps(summary) if args.json else describe(summary))
     return 0 if summary["landed"] else 1
@@ -204,6 +224,10 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     gcs_urls = [] if args.no_gcs else list(args.out or DEFAULT_GCS_URLS)
     if args.no_gcs:
         options.append("--no-gcs")
+    if args.no_record:
+        options.append("--no-record")
+    elif args.record is not None:
+        options += ["--record", str(args.record)]
     speedup = "max" if args.speedup is None else f"{args.speedup:g}"
     return run_sitl(args.world, speedup, options, gcs_urls, location)
 
@@ -268,7 +292,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.target == "sitl":
         from mission.bench import bench_sitl
 
-        result = bench_sitl(args.world)
+        result = bench_sitl(args.world, args.repeat)
         print(
             json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
         )

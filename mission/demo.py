@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from mission.fly import describe, fly
+from mission.recordings import default_recording_path
 from simbridge.plots import plot_ground_effect
 from simbridge.vehicle import load_vehicle
 from simbridge.world import load_world
@@ -19,7 +20,8 @@ def run_flight_demo(world: str, logs: Path, say=print) -> bool:
     )
     landed = True
     for model in ("analytic", "neural", "none"):
-        summary = fly(DEMO_MISSION, world=world, model=model)
+        record = default_recording_path(DEMO_MISSION, model, logs)
+        summary = fly(DEMO_MISSION, world=world, model=model, record=record)
         say(describe(summary))
         landed &= bool(summary["landed"])
     vehicle = load_vehicle(load_world(world).vehicle)

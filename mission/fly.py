@@ -13,6 +13,7 @@ from typing import Any
 from autopilot.mission_items import Home
 from mission.formats import load_mission_file
 from mission.gcs_client import GroundStation, GroundStationError, VehicleEnded
+from mission.recordings import default_recording_path
 from simbridge.config import ConfigError
 from simbridge.launch import finish, start_sim
 from simbridge.world import load_world, resolve_world_path
@@ -60,6 +61,7 @@ def fly(
     via_gcs: bool = True,
     identity: str = "px4",
     say: Callable[[str], None] = lambda text: None,
+    record: bool | Path = True,
     autopilot_options: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line.
@@ -67,6 +69,8 @@ def fly(
     `via_gcs`: a ground station on pymavlink uploads the mission, arms, starts it and waits
     for the disarm, as a user's would. Otherwise the autopilot loads the mission and arms by
     itself at a fixed simulated time, so that the same flight gives the same trajectory.
+    `record`: True records to a new file in the logs folder, a path records there, False not
+    at all.
     """
     world_obj = load_world(world)  # refuse a bad world or mission before starting anything
     o = world_obj.origin
@@ -78,6 +82,11 @@ def fly(
         options += ["--trajectory", str(trajectory)]
     if network is not None:
         options += ["--network", str(network)]
+    if record is False:
+        options += ["--no-record"]
+    else:
+        path = default_recording_path(mission_path, model) if record is True else record
+        options += ["--record", str(path), "--record-world", str(resolve_world_path(world))]
     options += autopilot_options  # e.g. the experiments' --online METHOD
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
@@ -173,5 +182,6 @@ def describe(summary: dict[str, Any]) -> str:
             f"{fmt('rtf', 'x real time')}; controller {fmt('controller_us_p50', 'us')} p50, "
             f"{fmt('controller_us_p99', 'us')} p99",
             f"  {summary['simulator']}",
+            *([f"  recording: {summary['recording']}"] if summary.get("recording") else []),
         ]
     )

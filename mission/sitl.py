@@ -73,6 +73,7 @@ def run_sitl(
             "--sim", f"tcp:127.0.0.1:{port}",
             "--origin", f"{o.lat_deg},{o.lon_deg},{o.alt_m}",
             *[a for url in gcs_urls for a in ("--out", url)],
+            "--record-world", str(world_path),  # ignored when not recording
             *autopilot_options,
         ]  # fmt: skip
         autopilot = subprocess.Popen(cmd)

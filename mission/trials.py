@@ -47,7 +47,9 @@ def fly_landing_trials(
             path = Path(tmp) / f"trial_{seed}.yaml"
             path.write_text(yaml.safe_dump(mission))
             # reproducible: the autopilot arms itself at a fixed simulated time
-            flown = fly(path, world, model, start=start, network=network, via_gcs=False)
+            flown = fly(
+                path, world, model, start=start, network=network, via_gcs=False, record=False
+            )
             results.append(flown)
     return results
 

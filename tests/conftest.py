@@ -13,6 +13,14 @@ import yaml
 os.environ.setdefault("MAVLINK20", "1")
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _recordings_in_a_temporary_folder(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Flights record by default; in the tests, not into the repository's logs/."""
+    from mission.recordings import LOGS_ENV
+
+    os.environ[LOGS_ENV] = str(tmp_path_factory.mktemp("logs"))
+
+
 @pytest.fixture
 def sim_process() -> Iterator[Callable[..., tuple[subprocess.Popen[str], int]]]:
     """Start `groundfx sim --port 0 ...`; returns (process, port). Killed at teardown."""

@@ -21,8 +21,9 @@ EXAMPLES = REPO / "mission" / "examples"
 
 
 def autopilot(port: int, mission: str, *extra: str) -> subprocess.Popen[str]:
+    # not recording: these tests time the link, and importing rerun delays the connection
     return subprocess.Popen(
-        autopilot_command(port, EXAMPLES / mission, *extra),
+        autopilot_command(port, EXAMPLES / mission, "--no-record", *extra),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -177,10 +178,12 @@ def test_garbage_on_the_link_is_counted_and_the_flight_goes_on():
 
 
 def test_bench_sitl_prints_its_figures():
-    result = run_groundfx("bench", "sitl", "--json")
+    result = run_groundfx("bench", "sitl", "--json", "--repeat", "1")
     assert result.returncode == 0, result.stderr
     figures = json.loads(result.stdout.strip().splitlines()[-1])
     assert figures["rtf"] > 1 and 0 < figures["controller_us_p50"] <= figures["controller_us_p99"]
+    assert figures["rtf_recording_off"] > 1 and figures["rtf_recording_on"] > 1
+    assert figures["recording_bytes"] > 100_000
 
 
 def test_a_bad_mission_is_refused_with_a_message(tmp_path: Path):

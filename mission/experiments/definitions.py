@@ -12,7 +12,7 @@ import hashlib
 import json
 from dataclasses import dataclass
 
-from mission.experiments.missions import MISSION_KINDS
+from mission.experiments.missions import MISSION_KINDS, make_mission
 
 ONLINE_METHODS = ("naive", "constraint", "margin", "ewc", "replay", "rls")
 MULTI_NETWORK = "@multi"  # the network trained on several rho once per campaign (4.2)
@@ -94,9 +94,11 @@ class Trial:
 
     @property
     def id(self) -> str:
-        """Experiment, condition, seed and a digest of the flights: a changed definition is a
-        new trial, never confused with an old result."""
-        spec = json.dumps([dataclasses.asdict(f) for f in self.flights], sort_keys=True)
+        """Experiment, condition, seed and a digest of the flights and their missions: a
+        changed definition is a new trial, never confused with an old result."""
+        missions = [make_mission(f.mission, self.seed) for f in self.flights]
+        flights = [dataclasses.asdict(f) for f in self.flights]
+        spec = json.dumps([flights, missions], sort_keys=True)
         digest = hashlib.sha256(spec.encode()).hexdigest()[:8]
         return f"{self.experiment}/{self.condition}/{self.seed}/{digest}"
 
@@ -236,8 +238,8 @@ def _flight_test() -> Experiment:
     return Experiment(
         "4.6",
         "Flight test",
-        "A mission with three near-ground holds (3 cm, 3 s each) joined by low passes at 6 cm, "
-        "then a landing, in the rho_sim = 2 world.",
+        "A mission of three approaches (a low pass 10 cm up, a 3 s hold 3 cm up, a climb to "
+        "30 cm), then a landing, in the rho_sim = 2 world.",
         (
             _c("none", "no model", BASELINE_TRIALS, dataclasses.replace(f, model="none")),
             _c("analytic", "analytic", 2, dataclasses.replace(f, model="analytic")),

@@ -4,7 +4,6 @@ the same result wherever it runs. This is what a pool worker or a Ray task execu
 
 from __future__ import annotations
 
-import inspect
 import subprocess
 import sys
 import tempfile
@@ -20,7 +19,6 @@ from mission.experiments.definitions import MEASURES, MULTI_NETWORK, Flight, Tri
 from mission.experiments.missions import make_mission
 from mission.fly import fly
 from mission.gather import world_yaml_with_rho
-from simbridge.config import ConfigError
 from simbridge.world import resolve_world_path
 
 # What the online branch gives the autopilot (and `groundfx fly`): the method by name, and the
@@ -69,16 +67,6 @@ def missing_for(trial_flights: tuple[Flight, ...]) -> str | None:
     )
 
 
-def _record_kwargs(path: Path | None) -> dict[str, Any]:
-    """fly()'s recording argument, once the recording branch has given it one."""
-    accepts = "record" in inspect.signature(fly).parameters
-    if path is None:
-        return {"record": False} if accepts else {}
-    if not accepts:
-        raise ConfigError("--keep-recordings: this groundfx does not record flights yet")
-    return {"record": path}
-
-
 def _world_file(flight: Flight, tmp: Path) -> str:
     if flight.rho_sim is None:
         return flight.world
@@ -94,7 +82,7 @@ def fly_trial(
     """Fly the trial's flights in order; the record the results file keeps. A flight that
     fails gives a record with `error` (a resumed campaign flies it again)."""
     wall0 = time.perf_counter()
-    record: dict[str, Any] = {"id": trial.id, **trial.to_dict(), "flights": []}
+    record: dict[str, Any] = {"id": trial.id, "trial": trial.to_dict(), "flights": []}
     try:
         with tempfile.TemporaryDirectory(prefix="gfx-trial-") as tmp_name:
             tmp = Path(tmp_name)
@@ -145,7 +133,7 @@ def _fly_one(
         network=network if flight.model == "neural" else None,
         via_gcs=False,
         autopilot_options=options,
-        **_record_kwargs(record_path),
+        record=record_path if record_path is not None else False,
     )
     if not summary.get("landed"):
         raise RuntimeError(f"flight {index} did not land: {summary.get('ended')}")

@@ -1,0 +1,300 @@
+"""The flight recorder's writer: `FlightRecorder`, opened through `autopilot.recorder`.
+
+See `autopilot.recorder` for what it records and how it keeps out of the loop's way, and
+`autopilot.recording` for the layout.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+import uuid
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import rerun as rr
+
+from autopilot.blueprint import default_blueprint
+from autopilot.controller import ControlOutput, FlightState, Setpoint
+from autopilot.mission_items import PlanStep
+from autopilot.recorder import FLUSH_WALL_S, RecordOptions
+from autopilot.recorder_rows import RowSender, scalars_key
+from autopilot.recording import (
+    APPLICATION_ID,
+    COUNTERS,
+    EVENTS,
+    GE_ARROW_M_PER_N,
+    GE_PREDICTED_ARROW,
+    GE_TRUE_ARROW,
+    LAYOUT_VERSION,
+    MAVLINK,
+    META,
+    SERIES,
+    TIMELINE,
+)
+from autopilot.rrbatch import ColumnBatch
+from autopilot.scene import (
+    log_drone,
+    log_mission,
+    log_world,
+    mission_path,
+)
+from autopilot.simlink import Step
+from simbridge.frames import Vec3
+from simbridge.rotors import Quad
+from simbridge.vehicle import Vehicle
+
+TRUTH = "DEBUG_VECT"
+TRUTH_NAME = "GE_TRUE"
+ESC = "ESC_TELEMETRY_1_TO_4"
+NAN3 = (math.nan,) * 3
+NAN4 = (math.nan,) * 4
+NAN2 = (math.nan,) * 2
+
+GE_COLORS = {"true": (40, 180, 80), "predicted": (255, 140, 0)}
+ROTOR_COLORS = ((220, 60, 60), (60, 120, 220), (60, 180, 90), (230, 170, 40))
+
+
+def _duration(t_s: np.ndarray) -> rr.TimeColumn:
+    # Whole nanoseconds, rounded: rerun would truncate t * 1e9 (0.012 s -> 11999999 ns).
+    return rr.TimeColumn(TIMELINE, duration=np.rint(t_s * 1e9).astype("timedelta64[ns]"))
+
+
+class FlightRecorder:
+    def __init__(
+        self,
+        options: RecordOptions,
+        vehicle: Vehicle,
+        modes: Sequence[str],
+    ) -> None:
+        self.path = options.path
+        self._vehicle = vehicle
+        self._boxes = options.world.obstacles if options.world is not None else ()
+        self._every_s = options.flush_every_s
+        self._modes = list(modes)
+        self._info = dict(options.info or {})
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
+        # looking at the origin until a mission tells where the landing is
+        rec.save(self.path, default_blueprint=default_blueprint())
+        rec.set_log_time_enabled(False)  # sim_time only: the same flight, the same data
+        rec.send_recording_name(self.path.stem)
+        self._rec = rec
+        self._sender = RowSender(rec)
+        self._rows: list[tuple[float, ...]] = []
+        self._events: list[tuple[float, str, str]] = []
+        self._learner: list[tuple[float, float, float]] = []
+        self._learner_lock = threading.Lock()  # the online learner reports from its thread
+        self._counters: dict[str, tuple[Callable[[], Sequence[int]], ColumnBatch]] = {}
+        self._next_flush_s = -math.inf
+        self._flush_deadline = -math.inf
+        self._last_t = 0.0
+        self._mode: str | None = None
+        self._mode_index = -1.0
+        self._armed = False
+        self._started = False
+        self._closed = False
+        # What recording costs: time in step() (flushes included) on the loop's thread, and
+        # the CPU time of rerun's threads (encoding, writing) beside it.
+        self._step_s = 0.0
+        self._steps = 0
+        self._cpu0 = time.process_time() - time.thread_time()
+        self._background_s = 0.0
+        self._log_static()
+
+    # -- the loop's calls -------------------------------------------------------------------
+
+    def step(
+        self,
+        t_s: float,
+        msgs: Step,
+        state: FlightState,
+        height_m: float,
+        mode: str,
+        armed: bool,
+        setpoint: Setpoint | None,
+        ge_n: Vec3,
+        speeds_rad_s: Quad,
+        output: ControlOutput | None,
+    ) -> None:
+        """One control step: what the autopilot saw, decided and sent, and the truth."""
+        t0 = time.perf_counter()
+        if not self._started:
+            self._start(t_s, state.position_m)
+        if mode != self._mode:
+            self._mode_changed(t_s, mode)
+        if armed != self._armed:
+            self._armed = armed
+            self._events.append((t_s, "INFO", "armed" if armed else "disarmed"))
+        truth = msgs.latest.get(TRUTH) if TRUTH in msgs.new else None
+        true_ge = (
+            (truth["x"], truth["y"], truth["z"])
+            if truth is not None and truth["name"] == TRUTH_NAME
+            else NAN3
+        )
+        actual = msgs.latest[ESC]["rpm"] if ESC in msgs.new else NAN4
+        if setpoint is not None:
+            sp, spv = setpoint.position_m, setpoint.velocity_m_s
+        else:
+            sp = spv = NAN3
+        desired = (output.desired_roll_rad, output.desired_pitch_rad) if output else NAN2
+        self._rows.append(  # in the order of recorder_rows.Row
+            (
+                t_s,
+                *state.position_m,
+                *state.velocity_m_s,
+                *state.quaternion,
+                *sp,
+                *spv,
+                height_m,
+                self._mode_index,
+                *ge_n,
+                *speeds_rad_s,
+                *true_ge,
+                *actual,
+                *desired,
+            )
+        )
+        self._last_t = t_s
+        if t_s >= self._next_flush_s or t0 >= self._flush_deadline:
+            self.flush()
+        self._steps += 1
+        self._step_s += time.perf_counter() - t0
+
+    def event(self, text: str, level: str = "INFO", t_s: float | None = None) -> None:
+        """A line in the event log (failsafes, link events, ...); level as rerun's TextLog:
+        TRACE, DEBUG, INFO, WARN, ERROR, CRITICAL. At the last step's time by default."""
+        self._events.append((self._last_t if t_s is None else t_s, level, text))
+
+    def learner(self, t_s: float, loss: float | None = None, version: int | None = None) -> None:
+        """The online learner's loss and the weight-snapshot version now in use (thread-safe)."""
+        with self._learner_lock:
+            self._learner.append(
+                (
+                    t_s,
+                    math.nan if loss is None else loss,
+                    math.nan if version is None else float(version),
+                )
+            )
+
+    def watch_counters(self, link: str, read: Callable[[], Sequence[int]]) -> None:
+        """Record `read()` = (received, dropped, rejected) of a MAVLink link at every flush."""
+        path = f"{MAVLINK}/{link}"
+        batch = ColumnBatch(TIMELINE)
+        batch.add(path, rr.Scalars.columns(scalars=np.zeros((1, len(COUNTERS)))))
+        self._counters[link] = (read, batch)
+        self._rec.log(path, rr.SeriesLines(names=list(COUNTERS)), static=True)
+
+    def close(self, ended: str) -> None:
+        """Flush everything, note how the flight ended, and finish the file (with its footer)."""
+        if self._closed:
+            return
+        self._closed = True
+        level = "INFO" if ended == "landed" else "WARN"
+        self._events.append((self._last_t, level, f"flight ended: {ended}"))
+        self.flush()
+        self._rec.flush()
+        self._rec.disconnect()  # closes the file sink: writes the footer
+        self._background_s = time.process_time() - time.thread_time() - self._cpu0
+
+    def stats(self) -> dict[str, float]:
+        """Recording's cost per control step, in microseconds: in the loop (`step`, flushes
+        included) and on rerun's threads (CPU time; they run beside the loop)."""
+        steps = max(self._steps, 1)
+        return {
+            "recorder_us_per_step": self._step_s / steps * 1e6,
+            "recorder_background_us_per_step": self._background_s / steps * 1e6,
+        }
+
+    # -- flushing ---------------------------------------------------------------------------
+
+    def flush(self) -> None:
+        """Send the buffered rows, events, learner reports and counters to rerun."""
+        rows, self._rows = self._rows, []
+        if rows:
+            self._sender.send(np.asarray(rows, dtype=float))
+        if self._events:
+            events, self._events = self._events, []
+            self._send(
+                EVENTS,
+                np.array([e[0] for e in events]),
+                rr.TextLog.columns(text=[e[2] for e in events], level=[e[1] for e in events]),
+            )
+        with self._learner_lock:
+            learned, self._learner = self._learner, []
+        if learned:
+            a = np.asarray(learned, dtype=float)
+            for col, path in ((1, "plots/learner/loss"), (2, "plots/learner/version")):
+                keep = ~np.isnan(a[:, col])
+                if keep.any():
+                    self._scalars(path, a[keep, 0], a[keep, col])
+        now_ns = np.array([round(self._last_t * 1e9)], dtype=np.int64)
+        for link, (read, batch) in self._counters.items():
+            counts = np.asarray([read()], dtype=float)
+            batch.send(self._rec, now_ns, {scalars_key(f"{MAVLINK}/{link}"): counts})
+        self._next_flush_s = self._last_t + self._every_s
+        self._flush_deadline = time.perf_counter() + FLUSH_WALL_S
+
+    def _send(self, path: str, t_s: np.ndarray, columns: Any) -> None:
+        rr.send_columns(path, indexes=[_duration(t_s)], columns=columns, recording=self._rec)
+
+    def _scalars(self, path: str, t_s: np.ndarray, values: np.ndarray) -> None:
+        self._send(path, t_s, rr.Scalars.columns(scalars=values))
+
+    # -- the static part and the start ------------------------------------------------------
+
+    def _log_static(self) -> None:
+        rec = self._rec
+        log_world(rec, self._boxes, [])
+        log_drone(rec, self._vehicle)
+        for path, names in SERIES.items():
+            if "/ground_effect/" in path:
+                color = GE_COLORS[path.rsplit("/", 1)[1]]
+                rec.log(path, rr.SeriesLines(names=list(names), colors=[color]), static=True)
+            elif path.startswith("plots/rotors/"):
+                rec.log(path, rr.SeriesLines(names=list(names), colors=ROTOR_COLORS), static=True)
+            else:
+                rec.log(path, rr.SeriesLines(names=list(names)), static=True)
+        for path, color in ((GE_TRUE_ARROW, "true"), (GE_PREDICTED_ARROW, "predicted")):
+            rec.log(path, rr.Arrows3D.from_fields(colors=[GE_COLORS[color]]), static=True)
+        self._log_meta()
+
+    def _log_meta(self) -> None:
+        meta = {
+            "layout_version": LAYOUT_VERSION,
+            "modes": self._modes,
+            "vehicle": self._vehicle.name,
+            "ge_arrow_m_per_n": GE_ARROW_M_PER_N,
+            "flush_every_s": self._every_s,
+            **self._info,
+        }
+        self._rec.log(
+            META, rr.TextDocument(json.dumps(meta, indent=1), media_type="text/plain"), static=True
+        )
+
+    def _start(self, t_s: float, position_m: Vec3) -> None:
+        self._started = True
+        self.learner(t_s, version=0)  # the offline weights until an online update replaces them
+
+    def mission(
+        self, plan: Sequence[PlanStep], start_m: Vec3, home_m: Vec3 | None, t_s: float
+    ) -> None:
+        """Draw the mission from where the vehicle is (a new upload replaces the drawing from
+        `t_s` on), widen the ground under it and look at where it lands."""
+        points, labels, path = mission_path(plan, start_m, home_m, self._boxes)
+        log_world(self._rec, self._boxes, path)
+        self._rec.set_time(TIMELINE, duration=np.timedelta64(round(t_s * 1e9), "ns"))
+        log_mission(self._rec, points, labels, path)
+        if points:
+            self._rec.send_blueprint(default_blueprint(path[-1]), make_active=False)
+
+    def _mode_changed(self, t_s: float, mode: str) -> None:
+        if mode not in self._modes:  # a mode the caller did not announce: name it in the meta
+            self._modes.append(mode)
+            self._log_meta()
+        self._events.append((t_s, "INFO", f"mode {mode}" if self._mode else f"mode {mode} (start)"))
+        self._mode = mode
+        self._mode_index = float(self._modes.index(mode))

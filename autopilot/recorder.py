@@ -1,0 +1,113 @@
+"""The flight recorder: every flight as one rerun recording, written by the autopilot.
+
+The simulator's truth reaches the autopilot over MAVLink (the true state in
+HIL_STATE_QUATERNION, the true ground-effect force in DEBUG_VECT "GE_TRUE", the actual rotor
+speeds in ESC telemetry), so the autopilot alone writes truth and its own view side by side:
+one process, one file, one recording id. The layout is `autopilot.recording`'s.
+
+The loop must not wait for it. `step` appends one tuple per control step; every
+`flush_every_s` of simulated time (or FLUSH_WALL_S of wall time, if that comes first) the
+rows become numpy columns and leave as a few Arrow record batches (`autopilot.recorder_rows`,
+`autopilot.rrbatch`: one per set of entities sharing their times, not one call per entity);
+rerun encodes and writes them on its own thread. A SIGKILL loses at most the rows since the
+last flush (and the footer: the reader copes).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+if TYPE_CHECKING:
+    from autopilot.controller import ControlOutput, FlightState, Setpoint
+    from autopilot.mission_items import PlanStep
+    from autopilot.simlink import Step
+    from simbridge.frames import Vec3
+    from simbridge.rotors import Quad
+    from simbridge.vehicle import Vehicle
+    from simbridge.world import World
+
+FLUSH_EVERY_S = 4.0  # simulated seconds between flushes, at most (what a SIGKILL may lose)
+FLUSH_WALL_S = 0.5  # ... and wall seconds: when the simulator runs slower than 8x real time
+
+
+class Recorder(Protocol):
+    """What the flight loop calls; `NullRecorder` when recording is off."""
+
+    def step(
+        self,
+        t_s: float,
+        msgs: Step,
+        state: FlightState,
+        height_m: float,
+        mode: str,
+        armed: bool,
+        setpoint: Setpoint | None,
+        ge_n: Vec3,
+        speeds_rad_s: Quad,
+        output: ControlOutput | None,
+    ) -> None: ...
+    def event(self, text: str, level: str = "INFO", t_s: float | None = None) -> None: ...
+    def learner(
+        self, t_s: float, loss: float | None = None, version: int | None = None
+    ) -> None: ...
+    def watch_counters(self, link: str, read: Callable[[], Sequence[int]]) -> None: ...
+    def mission(
+        self, plan: Sequence[PlanStep], start_m: Vec3, home_m: Vec3 | None, t_s: float
+    ) -> None: ...
+    def close(self, ended: str) -> None: ...
+    def stats(self) -> dict[str, float]: ...
+
+
+@dataclass(frozen=True)
+class RecordOptions:
+    """Where and what to record: the file, and the world drawn in it (the autopilot does not
+    know the simulator's world; the world file is passed for the picture only)."""
+
+    path: Path
+    world: World | None = None
+    info: Mapping[str, Any] | None = None  # stored in the recording's meta (model, rho, ...)
+    flush_every_s: float = FLUSH_EVERY_S
+
+
+class NullRecorder:
+    """Recording off."""
+
+    def step(self, *args: object) -> None:
+        pass
+
+    def event(self, text: str, level: str = "INFO", t_s: float | None = None) -> None:
+        pass
+
+    def learner(self, t_s: float, loss: float | None = None, version: int | None = None) -> None:
+        pass
+
+    def watch_counters(self, link: str, read: Callable[[], Sequence[int]]) -> None:
+        pass
+
+    def mission(
+        self, plan: Sequence[PlanStep], start_m: Vec3, home_m: Vec3 | None, t_s: float
+    ) -> None:
+        pass
+
+    def close(self, ended: str) -> None:
+        pass
+
+    def stats(self) -> dict[str, float]:
+        return {}
+
+
+def open_recorder(
+    options: RecordOptions | None,
+    vehicle: Vehicle,
+    modes: Sequence[str],
+) -> Recorder:
+    if options is None:
+        return NullRecorder()
+    # imported here: rerun takes a quarter of a second to import, which an autopilot that
+    # does not record should not wait for
+    from autopilot.flight_recorder import FlightRecorder
+
+    return FlightRecorder(options, vehicle, modes)

@@ -1,0 +1,174 @@
+"""The recorder's per-step rows and how a flush turns them into rerun data.
+
+`FlightRecorder.step` appends one tuple per control step in the order of `Row` below (so
+that the loop pays for one tuple, nothing more); `RowSender.send` turns a block of them into
+columns: every step's plots as one Arrow batch, the truth and the ESC telemetry where they
+arrived, the 3-D scene at 50 Hz and the trail (`autopilot.trail`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import rerun as rr
+
+from autopilot.recording import (
+    DRONE,
+    GE_ARROW_M_PER_N,
+    GE_PREDICTED_ARROW,
+    GE_TRUE_ARROW,
+    SERIES,
+    TIMELINE,
+    TRAJECTORY,
+)
+from autopilot.rrbatch import ColumnBatch
+from autopilot.trail import Trail, firsts
+from simbridge.hil import RAD_S_TO_RPM
+
+
+class Row:
+    """Where each quantity starts in a row: time s; position m, velocity m/s, quaternion
+    (w, x, y, z); setpoint position m and velocity m/s (NaN: none); height m; mode index;
+    predicted ground effect N; commanded rotor speeds rad/s; true ground effect N (NaN: not
+    received this step); actual rotor speeds rpm (NaN: not received); desired roll, pitch rad
+    (NaN: no control output)."""
+
+    T, P, V, Q, SP, SPV, H, MODE, GE, N, TRUE, ACT, DES = (
+        0, 1, 4, 7, 11, 14, 17, 18, 19, 22, 26, 29, 33,
+    )  # fmt: skip
+    WIDTH = 35
+
+
+SCENE_PERIOD_S = 0.02  # the 3-D scene at 50 Hz (the plots keep every step)
+TRAIL_SPACING_M = 0.01  # a trail point every centimetre flown
+TRAIL_PERIOD_S = 0.25  # the trail is redrawn this often (simulated seconds)
+TRAIL_SEGMENT_S = 10.0  # world/trajectory/0 covers 0-10 s of flight, /1 10-20 s, ...
+TRAIL_RGBA = 0xFFFFFFFF  # white, opaque (rerun packs colours as 0xRRGGBBAA)
+
+# The series logged at every step (the rest: truth, ESC telemetry, learner reports).
+STEP_SERIES = tuple(
+    p
+    for p in SERIES
+    if not p.startswith("plots/learner/") and not p.endswith("/true") and p != "plots/rotors/actual"
+)
+
+
+def scalars_key(path: str) -> str:
+    """The key of a time series' values in a ColumnBatch."""
+    return f"{path}:Scalars:scalars"
+
+
+def _scalars(width: int) -> Any:
+    return rr.Scalars.columns(scalars=np.zeros((1, width)))
+
+
+class RowSender:
+    def __init__(self, rec: rr.RecordingStream) -> None:
+        self._rec = rec
+        self._step = ColumnBatch(TIMELINE)
+        for path in STEP_SERIES:
+            self._step.add(path, _scalars(len(SERIES[path])))
+        self._truth = ColumnBatch(TIMELINE)
+        for axis in "xyz":
+            self._truth.add(f"plots/ground_effect/{axis}/true", _scalars(1))
+        self._esc = ColumnBatch(TIMELINE)
+        self._esc.add("plots/rotors/actual", _scalars(4))
+        self._scene = ColumnBatch(TIMELINE)
+        zero = np.zeros((1, 3))
+        self._scene.add(DRONE, rr.Transform3D.columns(translation=zero, quaternion=[[0, 0, 0, 1]]))
+        for path in (GE_PREDICTED_ARROW, GE_TRUE_ARROW):
+            self._scene.add(path, rr.Arrows3D.columns(origins=zero, vectors=zero))
+        self._scene_t = -np.inf  # the last step the scene has seen
+        self._truth_held = np.zeros(3)  # the true ground effect last received
+        self._trail = Trail(TRAIL_SPACING_M, TRAIL_PERIOD_S, TRAIL_SEGMENT_S)
+        self._trail_batches: dict[str, ColumnBatch] = {}  # one per segment
+
+    def send(self, a: np.ndarray) -> None:
+        """Rows [n, Row.WIDTH] to rerun."""
+        r = Row
+        t = a[:, r.T]
+        time_ns = np.rint(t * 1e9).astype(np.int64)
+        p, v, q = a[:, r.P : r.P + 3], a[:, r.V : r.V + 3], a[:, r.Q : r.Q + 4]
+        sp, spv = a[:, r.SP : r.SP + 3], a[:, r.SPV : r.SPV + 3]
+        ge, true_ge = a[:, r.GE : r.GE + 3], a[:, r.TRUE : r.TRUE + 3]
+        w, x, y, z = q.T
+        roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+        pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+        attitude_error = a[:, r.DES : r.DES + 2] - np.column_stack((roll, pitch))
+        values = {
+            scalars_key("plots/position"): p,
+            scalars_key("plots/velocity"): v,
+            scalars_key("plots/setpoint"): sp,
+            scalars_key("plots/z"): np.column_stack((p[:, 2], sp[:, 2])),
+            scalars_key("plots/height"): a[:, r.H],
+            scalars_key("plots/mode"): a[:, r.MODE],
+            scalars_key("plots/errors/position"): sp - p,
+            scalars_key("plots/errors/velocity"): spv - v,
+            scalars_key("plots/errors/attitude"): attitude_error,
+            scalars_key("plots/rotors/commanded"): a[:, r.N : r.N + 4],
+        }
+        for i, axis in enumerate("xyz"):
+            values[scalars_key(f"plots/ground_effect/{axis}/predicted")] = ge[:, i]
+        self._step.send(self._rec, time_ns, values)
+        has_truth = ~np.isnan(true_ge[:, 0])
+        if has_truth.any():
+            values = {
+                scalars_key(f"plots/ground_effect/{axis}/true"): true_ge[has_truth, i]
+                for i, axis in enumerate("xyz")
+            }
+            self._truth.send(self._rec, time_ns[has_truth], values)
+        has_esc = ~np.isnan(a[:, r.ACT])
+        if has_esc.any():
+            actual = a[has_esc, r.ACT : r.ACT + 4] / RAD_S_TO_RPM
+            self._esc.send(
+                self._rec, time_ns[has_esc], {scalars_key("plots/rotors/actual"): actual}
+            )
+        self._send_scene(t, time_ns, p, q, ge, true_ge)
+        self._send_trail(t, p)
+
+    def _send_scene(
+        self,
+        t: np.ndarray,
+        time_ns: np.ndarray,
+        p: np.ndarray,
+        q: np.ndarray,
+        ge: np.ndarray,
+        true_ge: np.ndarray,
+    ) -> None:
+        """The drone's pose and the ground-effect arrows at SCENE_PERIOD_S: a 3-D view needs
+        no more, and it is a third of the data."""
+        keep = firsts(t, self._scene_t, SCENE_PERIOD_S)
+        # the truth last received (it comes every step unless the world slows it down)
+        seen = np.flatnonzero(~np.isnan(true_ge[:, 0]))
+        truth = np.tile(self._truth_held, (len(t), 1))
+        if len(seen):
+            held = np.searchsorted(seen, np.arange(len(t)), side="right") - 1
+            truth[held >= 0] = true_ge[seen[held[held >= 0]]]
+            self._truth_held = true_ge[seen[-1]]
+        self._scene_t = t[-1]
+        if not keep.any():
+            return
+        values = {
+            f"{DRONE}:Transform3D:translation": p[keep],
+            f"{DRONE}:Transform3D:quaternion": q[keep][:, [1, 2, 3, 0]],  # rerun's: x y z w
+            f"{GE_PREDICTED_ARROW}:Arrows3D:origins": p[keep],
+            f"{GE_PREDICTED_ARROW}:Arrows3D:vectors": ge[keep] * GE_ARROW_M_PER_N,
+            f"{GE_TRUE_ARROW}:Arrows3D:origins": p[keep],
+            f"{GE_TRUE_ARROW}:Arrows3D:vectors": truth[keep] * GE_ARROW_M_PER_N,
+        }
+        self._scene.send(self._rec, time_ns[keep], values)
+
+    def _send_trail(self, t: np.ndarray, p: np.ndarray) -> None:
+        for segment, (times, strips) in self._trail.update(t, p).items():
+            path = f"{TRAJECTORY}/{segment}"
+            if path not in self._trail_batches:
+                batch = ColumnBatch(TIMELINE)
+                batch.add(path, rr.LineStrips3D.columns(strips=[np.zeros((2, 3))], colors=[0]))
+                self._trail_batches[path] = batch
+            values = {
+                f"{path}:LineStrips3D:strips": strips,
+                f"{path}:LineStrips3D:colors": np.full(len(strips), TRAIL_RGBA, dtype=np.uint32),
+            }
+            time_ns = np.rint(np.asarray(times) * 1e9).astype(np.int64)
+            self._trail_batches[path].send(self._rec, time_ns, values)

@@ -1,0 +1,107 @@
+"""The vehicle the real ground-station clients fly (tests/test_mavsdk.py, test_mavproxy.py):
+`groundfx sim` and `groundfx autopilot` as processes over loopback UDP.
+
+Each client flies the square mission (mission/examples/square.*: take off to 1 m, four
+waypoints at 0.5 then 1 m/s, land at home) under the PX4 and the ArduCopter identity. Every
+wait is bounded and says what it waited for. Ports are ephemeral, never 14540/14550, which a
+user's ground station may hold.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import socket
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import pytest
+
+from mission.formats import load_mission_file
+from simbridge.frames import geodetic_to_local
+from simbridge.launch import start_sim
+from tests.helpers import REPO
+
+os.environ.setdefault("MAVLINK20", "1")
+
+
+EXAMPLES = REPO / "mission" / "examples"
+IDENTITIES = ("px4", "ardupilot")
+# Ten times real time: a flight takes 5-7 s wall. As fast as it can (10-25 times here) both
+# clients fly it too, in 3-6 s, but the simulator and the autopilot then take both cores,
+# from the client and from whatever else runs.
+SPEEDUP = "10"
+LANDING_ACCEPTANCE_M = 0.02  # NAV_ACC_RAD, set by each client: where the descent begins
+LANDED_WITHIN_M = 0.03
+FLIGHT_WALL_S = 60.0  # the square takes about 40 s simulated: 4 s wall at speedup 10
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class Vehicle:
+    sim: subprocess.Popen[str]
+    autopilot: subprocess.Popen[str]
+
+    def summary(self, timeout_s: float = 20.0) -> dict[str, Any]:
+        """The autopilot's JSON summary: it ends by itself once it has landed and settled."""
+        try:
+            out, err = self.autopilot.communicate(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            self.autopilot.kill()
+            out, err = self.autopilot.communicate()
+            pytest.fail(f"the autopilot did not end within {timeout_s} s of the landing: {err}")
+        lines = out.strip().splitlines()
+        assert self.autopilot.returncode == 0 and lines, f"autopilot failed: {err.strip()}"
+        return json.loads(lines[-1])
+
+
+@pytest.fixture
+def vehicle() -> Iterator[Callable[[str, str], Vehicle]]:
+    """Start `groundfx sim` and `groundfx autopilot --identity ID --out URL`; both are ended
+    (terminated, then killed if need be) at teardown."""
+    started: list[subprocess.Popen[str]] = []
+
+    def start(identity: str, out_url: str) -> Vehicle:
+        sim, port = start_sim("default", speedup=SPEEDUP)
+        started.append(sim)
+        command = [
+            sys.executable, "-m", "mission.cli", "autopilot",
+            "--sim", f"tcp:127.0.0.1:{port}", "--identity", identity, "--params-file", "none",
+            "--out", out_url, "--exit-after-landing", "--json",
+        ]  # fmt: skip
+        autopilot = subprocess.Popen(
+            command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO
+        )
+        started.append(autopilot)
+        return Vehicle(sim, autopilot)
+
+    yield start
+    for proc in reversed(started):  # the autopilot first: the simulator then ends cleanly
+        if proc.poll() is None:
+            proc.terminate()
+        try:
+            proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+
+
+def square_items() -> tuple[Any, ...]:
+    return load_mission_file(EXAMPLES / "square.plan").items
+
+
+def distance_m(lat: float, lon: float, to_lat: float, to_lon: float) -> float:
+    east, north = geodetic_to_local(to_lat, to_lon, lat, lon)
+    return math.hypot(east, north)
+
+
+# --- MAVSDK ---------------------------------------------------------------------------------

@@ -1,0 +1,279 @@
+"""Flight recordings: written by the autopilot, read back with `autopilot.recording`, reviewed."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from autopilot.flight_recorder import FlightRecorder
+from autopilot.mission_items import Home, plan_steps
+from autopilot.recorder import RecordOptions
+from autopilot.recording import (
+    ENTITY_PATHS,
+    MISSION_PATH,
+    OBSTACLES,
+    TRAJECTORY,
+    WAYPOINTS,
+    read_recording,
+)
+from autopilot.runner import MODES
+from mission.fly import autopilot_command
+from mission.formats import load_mission_file
+from mission.recordings import LOGS_ENV
+from simbridge.launch import finish, start_sim
+from simbridge.vehicle import load_vehicle
+from tests.helpers import REPO, run_groundfx
+
+EXAMPLES = REPO / "mission" / "examples"
+
+
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, np.ndarray]:
+    """`groundfx fly` onto the box of the obstacles world, recording to the default place."""
+    tmp = tmp_path_factory.mktemp("flown")
+    trajectory = tmp / "t.npz"
+    result = run_groundfx(
+        "fly",
+        str(EXAMPLES / "land_on_box.yaml"),
+        "--world",
+        "obstacles",
+        "--trajectory",
+        str(trajectory),
+        "--json",
+    )
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout.strip().splitlines()[-1])
+    return summary, np.load(trajectory)["log"]
+
+
+def test_fly_records_to_the_logs_folder_by_default(flown):
+    summary, _ = flown
+    path = Path(summary["recording"])
+    assert path.parent == Path(os.environ[LOGS_ENV]) and path.suffix == ".rrd"
+    assert "land_on_box-analytic" in path.name and path.stat().st_size > 100_000
+
+
+def test_the_recording_holds_the_trajectory_the_autopilot_flew(flown):
+    summary, log = flown
+    recording = read_recording(summary["recording"])
+    assert recording.complete
+    flown_again = recording.trajectory()
+    assert flown_again.shape == log.shape == (summary["steps"], 10)
+    np.testing.assert_allclose(flown_again[:, 0], log[:, 0], rtol=0, atol=1e-9)
+    assert np.array_equal(flown_again[:, 1:], log[:, 1:], equal_nan=True)  # bit for bit
+    assert recording.meta["model"] == "analytic" and recording.meta["modes"] == MODES
+    translation = recording.values("world/drone", "Transform3D:translation")  # 50 Hz, float32
+    at = np.searchsorted(log[:, 0], recording.times("world/drone") - 1e-9)
+    assert len(at) > summary["sim_s"] * 49
+    np.testing.assert_allclose(translation, log[at, 1:4], atol=1e-6)
+
+
+def test_every_entity_of_the_layout_is_there_with_increasing_times(flown):
+    recording = read_recording(flown[0]["recording"])
+    paths = set(recording.entity_paths())
+    assert set(ENTITY_PATHS) | {OBSTACLES} <= paths
+    assert any(p.startswith(TRAJECTORY + "/") for p in paths)
+    for path in paths:
+        steps = np.diff(recording.times(path))
+        assert np.all(steps >= 0 if path == "events" else steps > 0), path
+    events = [text for _, _, text in recording.texts()]
+    assert events[0] == "mode disarmed (start)" and "armed" in events and "disarmed" in events
+    assert events[-1] == "flight ended: landed"
+    received, dropped, rejected = recording.scalars("plots/mavlink/sim")[1][-1]
+    assert received > 3 * flown[0]["steps"] and dropped == rejected == 0
+    # `groundfx fly` flew it through a ground station: its link, upload and progress
+    received, dropped, rejected = recording.scalars("plots/mavlink/gcs")[1][-1]
+    assert received == flown[0]["gcs"]["received"] > 5 and dropped == rejected == 0
+    assert "mission of 4 items" in events and "mission item 2 reached" in events
+
+
+def test_the_default_blueprint_shows_what_is_recorded(flown):
+    import rerun.chunk as rc
+
+    recording = read_recording(flown[0]["recording"])
+    reader = rc.RrdReader(flown[0]["recording"])
+    views: dict[str, dict[str, list[str]]] = {}
+    for chunk in reader.stream(store=reader.blueprints()[0]):
+        batch = chunk.to_record_batch()
+        for name in ("ViewBlueprint:display_name", "ViewBlueprint:space_origin"):
+            if name in batch.schema.names:
+                views.setdefault(chunk.entity_path, {})[name] = batch.column(name).to_pylist()[0]
+    origins = {
+        v["ViewBlueprint:display_name"][0]: v["ViewBlueprint:space_origin"][0]
+        for v in views.values()
+    }
+    assert {"world", "z and its setpoint (m)", "ground effect z (N)", "events"} <= set(origins)
+    for name, origin in origins.items():  # every view looks at something in the recording
+        assert any(p == origin or p.startswith(origin + "/") for p in recording.entities), name
+
+
+def test_true_and_predicted_ground_effect_are_both_recorded(flown):
+    recording = read_recording(flown[0]["recording"])
+    t_true, true_z = recording.scalars("plots/ground_effect/z/true")
+    t_pred, predicted_z = recording.scalars("plots/ground_effect/z/predicted")
+    assert len(t_true) > 0.9 * len(t_pred) > 1000
+    _, mode = recording.scalars("plots/mode")
+    holding = np.flatnonzero(mode[:, 0] == MODES.index("holding"))
+    low = t_pred[holding[-1]]  # the end of the hold 3 cm above the box
+    i, j = np.searchsorted(t_true, low), np.searchsorted(t_pred, low)
+    assert true_z[i, 0] > 0.05  # the box's ground effect, in newtons
+    assert predicted_z[j, 0] == pytest.approx(true_z[i, 0], rel=0.05)  # the analytic expert
+    arrows = recording.values("world/ground_effect/true", "Arrows3D:vectors")
+    assert arrows[:, 2].max() > 0.05
+
+
+def test_a_recording_cut_in_the_middle_of_a_message_reads_up_to_the_cut(flown, tmp_path):
+    whole = Path(flown[0]["recording"]).read_bytes()
+    cut = tmp_path / "cut.rrd"
+    cut.write_bytes(whole[: len(whole) * 2 // 3 + 7])  # no footer, half a message at the end
+    recording = read_recording(cut)
+    assert not recording.complete
+    t = recording.trajectory()[:, 0]
+    assert 0.3 * flown[0]["sim_s"] < t[-1] < flown[0]["sim_s"]
+
+
+def test_a_killed_autopilot_leaves_a_recording_up_to_shortly_before_the_kill(tmp_path):
+    sim, port = start_sim("default", speedup="1")
+    path = tmp_path / "killed.rrd"
+    autopilot = subprocess.Popen(
+        autopilot_command(port, EXAMPLES / "hover.yaml", "--record", str(path)),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        time.sleep(4.0)  # starting, then flying in real time
+        assert autopilot.poll() is None
+        autopilot.send_signal(signal.SIGKILL)
+        autopilot.communicate(timeout=10)
+        line = finish(sim)  # the simulator's account: how far the flight got
+    finally:
+        if sim.poll() is None:
+            sim.kill()
+            sim.communicate(timeout=10)
+    flown_s = float(re.search(r"([0-9.]+) s simulated", line).group(1))
+    recording = read_recording(path)
+    assert not recording.complete
+    t = recording.trajectory()[:, 0]
+    assert flown_s > 1.0 and np.all(np.diff(t) > 0)
+    # flushed every 0.5 wall seconds in a real-time flight
+    assert flown_s - 1.0 < t[-1] <= flown_s
+    assert "flight ended" not in " ".join(text for _, _, text in recording.texts())
+
+
+def test_the_recorder_takes_learner_reports_and_events_from_the_loop(tmp_path):
+    from autopilot.controller import FlightState, Setpoint
+    from autopilot.simlink import Step
+
+    home = Home(59.0, 18.0, 0.0)
+    plan = plan_steps(load_mission_file(EXAMPLES / "square.yaml", home).items, home, 0.0)
+    path = tmp_path / "unit.rrd"
+    recorder = FlightRecorder(RecordOptions(path), load_vehicle(), MODES)
+    recorder.mission(plan, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
+    recorder.watch_counters("gcs", lambda: (7, 1, 2))
+    msgs = Step({"time_usec": 0}, {}, set())
+    for k in range(600):
+        t = k * 0.004
+        state = FlightState((0.0, 0.0, t), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        mode = "flying" if k >= 300 else "holding"
+        speeds = (70.0, 70.0, 70.0, 70.0)
+        recorder.step(t, msgs, state, t, mode, True, Setpoint((0, 0, 1)), (0, 0, 0), speeds, None)
+        if k == 500:
+            recorder.learner(t, loss=0.25, version=1)
+            recorder.event("failsafe: link lost", "WARN")
+    recorder.close("landed")
+    recording = read_recording(path)
+    t_version, version = recording.scalars("plots/learner/version")
+    assert version[:, 0].tolist() == [0.0, 1.0] and t_version[1] == pytest.approx(2.0)
+    assert recording.scalars("plots/learner/loss")[1][:, 0].tolist() == [0.25]
+    assert (pytest.approx(2.0), "WARN", "failsafe: link lost") in recording.texts()
+    assert recording.scalars("plots/mavlink/gcs")[1][-1].tolist() == [7.0, 1.0, 2.0]
+    assert len(recording.times("plots/rotors/actual")) == 0  # no ESC telemetry came
+    _, mode = recording.scalars("plots/mode")
+    assert mode[0, 0] == MODES.index("holding") and mode[-1, 0] == MODES.index("flying")
+    drawn = recording.values(WAYPOINTS, "Points3D:positions")[-1].reshape(-1, 3)
+    corners = [s.position_m for s in plan if s.kind == "waypoint"]
+    np.testing.assert_allclose(drawn[1 : 1 + len(corners)], corners, atol=1e-5)
+    assert len(recording.values(MISSION_PATH, "LineStrips3D:strips")) > 0
+
+
+def test_review_refuses_what_is_not_a_recording(tmp_path):
+    missing = run_groundfx("review", str(tmp_path / "nothing.rrd"))
+    assert missing.returncode == 2 and "Traceback" not in missing.stderr
+    assert "nothing.rrd: no such file" in missing.stderr
+    junk = tmp_path / "junk.rrd"
+    junk.write_bytes(b"not a recording at all" * 100)
+    refused = run_groundfx("review", str(junk))
+    assert refused.returncode == 2 and "Traceback" not in refused.stderr
+    assert "junk.rrd: not a rerun recording" in refused.stderr
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_review_web_serves_the_viewer_on_a_headless_machine(flown):
+    web, grpc = _free_port(), _free_port()
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    command = [sys.executable, "-m", "mission.cli", "review", flown[0]["recording"], "--web"]
+    review = subprocess.Popen(
+        [*command, "--web-port", str(web), "--grpc-port", str(grpc)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=REPO,
+    )
+    try:
+        page, deadline = "", time.monotonic() + 30
+        while time.monotonic() < deadline and review.poll() is None:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=2) as response:
+                    page = response.read().decode("utf-8", "replace")
+                break
+            except OSError:
+                time.sleep(0.2)
+        assert review.poll() is None, review.communicate()
+        assert "<html" in page.lower()
+    finally:
+        review.send_signal(signal.SIGINT)  # Ctrl-C: the viewer's server ignores SIGTERM
+        try:
+            out, _ = review.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            review.kill()
+            out, _ = review.communicate()
+    assert "groundfx review:" in out and f"127.0.0.1:{web}" in out
+
+
+def test_the_trail_is_drawn_in_segments_that_join_up():
+    from autopilot.trail import Trail
+
+    trail = Trail(spacing_m=0.01, period_s=0.25, segment_s=10.0)
+    t = np.arange(0, 25.0, 0.004)
+    p = np.column_stack((0.05 * t, np.sin(t), np.zeros_like(t)))  # 25 s of flight
+    last: dict[int, np.ndarray] = {}
+    last_t = 0.0
+    for i in range(0, len(t), 500):  # flushes of 2 s
+        for segment, (times, strips) in trail.update(t[i : i + 500], p[i : i + 500]).items():
+            assert np.all(np.diff(times) > 0) and all(s.shape[1] == 3 for s in strips)
+            last[segment], last_t = strips[-1], times[-1]
+    assert sorted(last) == [0, 1, 2] and last_t == pytest.approx(24.75, abs=0.005)
+    np.testing.assert_allclose(last[0][0], p[0])  # from the start
+    np.testing.assert_allclose(last[2][-1], p[t <= last_t][-1])  # to the drone
+    for k in (0, 1):  # each segment's final drawing ends where the next one begins
+        np.testing.assert_allclose(last[k][-1], last[k + 1][0], atol=0.011)
+    drawn = sum(np.linalg.norm(np.diff(s, axis=0), axis=1).sum() for s in last.values())
+    flown = np.linalg.norm(np.diff(p[t <= last_t], axis=0), axis=1).sum()
+    assert drawn == pytest.approx(flown, rel=1e-3)
