@@ -172,13 +172,21 @@ def test_a_killed_campaign_resumes_where_it_stopped(
     campaign.append_result(path, first)
     with path.open("a") as f:
         f.write('{"id": "' + TINY[1].id + '", "fli')  # the second trial was being written
-    results = campaign.run_trials(TINY, tmp_path, {}, workers=1, progress=False)
+    results = campaign.run_trials(
+        TINY, tmp_path, {}, workers=1, keep_recordings=True, progress=False
+    )
     lines = path.read_text().splitlines()
     assert len(lines) == 3  # only the torn trial was flown again, on a line of its own
     assert json.loads(lines[-1])["id"] == TINY[1].id
     assert sorted(campaign.load_results(path)) == sorted(t.id for t in TINY)
-    # flights are deterministic: the resumed trial gives the result the pool had
+    # flights are deterministic, recorded or not: the resumed trial gives the pool's result
     assert _deterministic(results[TINY[1].id]) == _deterministic(pool_results[TINY[1].id])
+    recordings = list((tmp_path / "recordings").glob("*.rrd"))
+    assert [r.name for r in recordings] == [TINY[1].id.replace("/", "_") + "_0.rrd"]
+    from autopilot.recording import read_recording
+
+    z = read_recording(recordings[0]).trajectory()
+    assert len(z) > 1000
 
 
 @pytest.mark.skipif(
