@@ -25,6 +25,10 @@ from simbridge.world import resolve_world_path
 # adapted network written at the end of the flight (4.4 flies it again).
 ONLINE_OPTION = "--online"
 SAVE_NETWORK_OPTION = "--save-network"
+# A starved machine can stall a process past the autopilot's 1 s link timeout: the flight is
+# flown again (it is deterministic, so the retry gives what an unstarved flight would have).
+LINK_LOST = "lost the simulator link"
+LINK_RETRIES = 2
 # Kept from each flight's summary in the results file (the rest is wall-clock noise or bulk).
 KEPT = (
     *MEASURES,
@@ -124,17 +128,20 @@ def _fly_one(
     if recordings is not None:
         recordings.mkdir(parents=True, exist_ok=True)
         record_path = recordings / f"{trial.id.replace('/', '_')}_{index}.rrd"
-    summary = fly(
-        mission_path,
-        _world_file(flight, tmp),
-        flight.model,
-        rho=flight.rho_model,
-        start=start,
-        network=network if flight.model == "neural" else None,
-        via_gcs=False,
-        autopilot_options=options,
-        record=record_path if record_path is not None else False,
-    )
+    for _ in range(LINK_RETRIES + 1):
+        summary = fly(
+            mission_path,
+            _world_file(flight, tmp),
+            flight.model,
+            rho=flight.rho_model,
+            start=start,
+            network=network if flight.model == "neural" else None,
+            via_gcs=False,
+            autopilot_options=options,
+            record=record_path if record_path is not None else False,
+        )
+        if not str(summary.get("ended", "")).startswith(LINK_LOST):
+            break
     if not summary.get("landed"):
         raise RuntimeError(f"flight {index} did not land: {summary.get('ended')}")
     return summary
