@@ -91,7 +91,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         all_values[e.key] = values
         verdict_lines += [
             f"- {e.key} `{r['expectation'].a}` vs `{r['expectation'].b}` "
-            f"({r['expectation'].claim}): {r['verdict']}, p = {r['p']:.2g}"
+            f"({r['expectation'].claim}): {r['verdict']} (a - b = {r['diff'] * 1000:.2f} mm, "
+            f"p = {r['p']:.2g})"
             for r in rows
         ]
     unfinished = sum(1 for t in trials if t.id not in results)

@@ -83,7 +83,11 @@ def _conclusion(row: dict[str, Any], values: dict[str, dict[str, np.ndarray]]) -
     if row["verdict"] == "supported":
         return f"- The data support it: {said}: {data}."
     if row["verdict"] == "contradicted":
-        return f"- **The data differ from the expectation**: {said}, but {data}."
+        found = "lower" if row["diff"] < 0 else "higher"
+        return (
+            f"- **The data differ from the expectation**: {said}, but `{e.a}` is "
+            f"significantly {found}: {data}."
+        )
     return f"- Not shown by these trials: {said}: {data}."
 
 
