@@ -9,6 +9,7 @@ from pathlib import Path
 
 from learner.online.names import METHODS
 from mission import commands
+from mission.experiments.cli import add_experiment_parser
 from mission.mission_cli import add_mission_parser
 from mission.online_cli import add_online_learn_parsers, add_online_options
 from mission.recordings import add_record_options
@@ -249,6 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=commands.cmd_sitl)
 
     add_mission_parser(sub)
+    add_experiment_parser(sub)
 
     p = sub.add_parser("learn", help="gather data, train the ground-effect network, plot it")
     learn = p.add_subparsers(dest="action", required=True, metavar="ACTION")

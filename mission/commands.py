@@ -207,7 +207,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
         via_gcs=not args.no_gcs,
         identity=args.identity,
         say=print if args.verbose else (lambda text: None),
-        extra=tuple(extra),
+        autopilot_options=extra,
         record=False if args.no_record else (args.record or True),
     )
     print(json.dumps(summary) if args.json else describe(summary))

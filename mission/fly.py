@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -61,8 +61,8 @@ def fly(
     via_gcs: bool = True,
     identity: str = "px4",
     say: Callable[[str], None] = lambda text: None,
-    extra: tuple[str, ...] = (),
     record: bool | Path = True,
+    autopilot_options: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line.
 
@@ -82,12 +82,12 @@ def fly(
         options += ["--trajectory", str(trajectory)]
     if network is not None:
         options += ["--network", str(network)]
-    options += extra  # e.g. --online METHOD, --param NAME=VALUE
     if record is False:
         options += ["--no-record"]
     else:
         path = default_recording_path(mission_path, model) if record is True else record
         options += ["--record", str(path), "--record-world", str(resolve_world_path(world))]
+    options += autopilot_options  # e.g. the experiments' --online METHOD
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
     sim, port = start_sim(resolve_world_path(world), speedup=speedup, start=start)

@@ -32,7 +32,7 @@ def bench_online(method: str = "naive", repeat: int = 3, world: str = "rho2") ->
                     network="rho1",
                     via_gcs=False,
                     record=False,
-                    extra=extra,
+                    autopilot_options=extra,
                 )
             )
 

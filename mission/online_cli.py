@@ -37,7 +37,13 @@ def add_online_options(p: argparse.ArgumentParser) -> None:
         help="update in the learner thread; the control loop never waits "
         "(default with a ground station)",
     )
-    g.add_argument("--save-model", type=Path, help="save the adapted network here at the end")
+    g.add_argument(
+        "--save-model",
+        "--save-network",  # the name mission/experiments asks for
+        dest="save_model",
+        type=Path,
+        help="save the adapted network here at the end",
+    )
 
 
 def online_overrides(args: argparse.Namespace) -> dict[str, float]:

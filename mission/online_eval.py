@@ -27,7 +27,7 @@ import yaml
 from learner.online.names import METHODS, PROTECTING
 from learner.stats import gap_closed, mean_ci95
 from mission.fly import fly
-from mission.gather import _with_rho
+from mission.gather import world_yaml_with_rho
 from mission.trials import landing_trial
 from simbridge.world import resolve_world_path
 
@@ -44,7 +44,7 @@ def _trial_file(directory: Path, seed: int, hold_s: float) -> tuple[Path, str]:
 
 def _world_file(directory: Path, rho: float) -> Path:
     path = directory / f"world_rho{rho:g}.yaml"
-    path.write_text(_with_rho(resolve_world_path("default").read_text(), rho))
+    path.write_text(world_yaml_with_rho(resolve_world_path("default").read_text(), rho))
     return path
 
 
@@ -60,7 +60,7 @@ def _hold_error(
         network=network,
         via_gcs=False,
         record=False,
-        extra=tuple(extra),
+        autopilot_options=extra,
     )
     error = summary.get("hold_z_rms_error_m")
     # a trial that never held near the ground counts as the whole hold height, not as perfect

@@ -207,7 +207,7 @@ def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_pau
             start=start,
             via_gcs=False,
             record=record,
-            extra=extra,
+            autopilot_options=extra,
         )
 
     saved, rrd = tmp_path / "adapted.npz", tmp_path / "a.rrd"
