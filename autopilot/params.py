@@ -58,12 +58,31 @@ class ModelParams:
     rho: float = param(1.0, lo=0.01, hi=50.0, doc="rho of the analytic model (equation 3.4)")
 
 
+ONLINE_METHODS = ("off", "naive", "constraint", "margin", "ewc", "replay", "rls")
+
+
+@dataclass(frozen=True)
+class OnlineParams:
+    """The online learner (learner/online/settings.py has the rest of its settings)."""
+
+    method: int = param(
+        0, lo=0, hi=6, doc="0 off, 1 naive, 2 constraint, 3 margin, 4 ewc, 5 replay, 6 rls"
+    )
+    learning_rate: float = param(1e-3, lo=1e-7, hi=1.0, doc="Adam step size")
+    penalty: float = param(1.0, lo=0.0, hi=1e6, doc="lambda of constraint, margin, ewc")
+    margin: float = param(0.02, lo=0.0, hi=10.0, doc="free deviation per weight (margin)")
+    forgetting: float = param(0.95, lo=0.5, hi=1.0, doc="RLS forgetting factor per sample")
+    pause: int = param(0, lo=0, hi=1, doc="1: samples are ignored, the weights stay")
+    reset: int = param(0, lo=0, hi=1, doc="1: back to the offline weights (then reads 0 again)")
+
+
 GROUPS: dict[str, type] = {
     "controller": ControllerParams,
     "commander": CommanderParams,
     "failsafe": FailsafeParams,
     "fence": FenceParams,
     "model": ModelParams,
+    "online": OnlineParams,
 }
 # MAVLink name -> (group, field)
 NAMES: dict[str, tuple[str, str]] = {
@@ -94,6 +113,13 @@ NAMES: dict[str, tuple[str, str]] = {
     "GF_MAX_HOR_DIST": ("fence", "max_radius_m"),
     "GFX_GE_MODEL": ("model", "model"),
     "GFX_GE_RHO": ("model", "rho"),
+    "GFX_OL_METHOD": ("online", "method"),
+    "GFX_OL_LR": ("online", "learning_rate"),
+    "GFX_OL_LAMBDA": ("online", "penalty"),
+    "GFX_OL_MARGIN": ("online", "margin"),
+    "GFX_OL_FORGET": ("online", "forgetting"),
+    "GFX_OL_PAUSE": ("online", "pause"),
+    "GFX_OL_RESET": ("online", "reset"),
 }
 
 
@@ -222,6 +248,9 @@ class ParamStore:
     def geofence(self) -> Geofence:
         fence = self.group("fence")
         return Geofence(fence.max_altitude_m, fence.max_radius_m)
+
+    def online(self) -> OnlineParams:
+        return self.group("online")
 
     def model(self) -> tuple[str, float]:
         chosen = self.group("model")

@@ -6,6 +6,7 @@ sensors' time is the only clock. The loop is the edge; every decision is a pure 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 import time
@@ -25,6 +26,7 @@ from autopilot.ground_station import GroundStation, StepInput
 from autopilot.metrics import COLUMNS, flight_metrics, trajectory_sha256
 from autopilot.mission_items import MissionItem
 from autopilot.modes import FlightMode
+from autopilot.online_control import OnlineControl, OnlineOptions
 from autopilot.params import ParamStore
 from autopilot.recorder import RecordOptions, open_recorder
 from autopilot.signing import Signing
@@ -69,6 +71,7 @@ class AutopilotConfig:
     on_sample: Callable[[int], None] | None = None  # told the count of recorded samples
     # told each airborne step (t, messages, state, rotor speeds applied over the last period)
     on_step: Callable[[float, Step, FlightState, Quad], None] | None = None
+    online: OnlineOptions = OnlineOptions()  # online learning (GFX_OL_METHOD turns it on)
     record: RecordOptions | None = None  # the flight's rerun recording; None: off
 
 
@@ -233,6 +236,9 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     next_sample_s = 0.0
     # The recorder first: the simulator's clock starts when the link connects.
     recorder = open_recorder(config.record, vehicle, MODES)
+    online_options = dataclasses.replace(config.online, on_report=recorder.learner)
+    online = OnlineControl(online_options, config.params, config.network)
+    online.refresh(tuning.model, 0.0)
     user_on_event = config.on_event or (lambda t, text: None)
 
     def on_event(t: float, text: str) -> None:
@@ -246,6 +252,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     except LinkLost as lost:
         recorder.close(str(lost))
         gcs.close()
+        online.close()
         raise
     recorder.watch_counters("sim", link.counters)
     recorder.watch_counters("gcs", gcs.counters.recorded)
@@ -274,7 +281,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 cmd_state, _ = requests.set_mode(
                     cmd_state, FlightMode.MISSION, t, state.position_m, tuning.commander
                 )
-            tuning.refresh()
+            if tuning.refresh():
+                online.refresh(tuning.model, t)
             cmd = command(
                 cmd_state,
                 tuning.commander,
@@ -288,25 +296,31 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             airborne = height > resting_height + AIRBORNE_MARGIN_M
             if config.on_step is not None and airborne and cmd_state.phase in RECORDED_PHASES:
                 config.on_step(t, step, state, speeds)
+            sample_hz = config.record_hz or online.sample_hz
             if (
-                config.record_hz > 0.0
+                sample_hz > 0.0
                 and t >= next_sample_s
                 and airborne
                 and cmd_state.phase in RECORDED_PHASES
             ):
-                samples.append(learning_sample(t, step, state, height, speeds, vehicle))
-                period = 1.0 / config.record_hz  # on a 100 Hz schedule, 250 Hz steps
+                row = learning_sample(t, step, state, height, speeds, vehicle)
+                online.submit(row)
+                if config.record_hz > 0.0:
+                    samples.append(row)
+                period = 1.0 / sample_hz  # on a 100 Hz schedule, 250 Hz steps
                 next_sample_s = next_sample_s + period if t - next_sample_s < period else t + period
                 if config.on_sample is not None:
                     config.on_sample(len(samples))
                 if (
-                    config.stop_after_samples is not None
+                    config.record_hz > 0.0
+                    and config.stop_after_samples is not None
                     and len(samples) >= config.stop_after_samples
                 ):
                     ended = "enough samples"
                     break
             if cmd.setpoint is not None:
                 t0 = time.perf_counter()
+                online.apply(tuning.model)
                 target = tuning.model.predict(
                     GroundEffectInputs(height, state.velocity_m_s, state.quaternion, speeds)
                 )
@@ -346,6 +360,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         ended = str(lost)
     finally:
         link.close()
+        online_summary = online.close()
         station.save_signing(time.monotonic())
         gcs.close()
         # an exception on its way out (Ctrl-C, SIGTERM) ended the flight, not `ended`
@@ -375,6 +390,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         unknown=link.unknown,
         gcs=gcs.counters.as_dict(),
         mission_items=len(station.items),
+        **online_summary,
     )
     summary.update(recorder.stats())
     data = np.asarray(samples, dtype=float) if samples else None

@@ -7,8 +7,11 @@ import math
 import sys
 from pathlib import Path
 
+from learner.online.names import METHODS
 from mission import commands, gap_cli
+from mission.experiments.cli import add_experiment_parser
 from mission.mission_cli import add_mission_parser
+from mission.online_cli import add_online_learn_parsers, add_online_options
 from mission.recordings import add_record_options
 from mission.review import add_review_parser
 from simbridge.config import ConfigError
@@ -163,6 +166,13 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--network", default="rho2", help="model file or packaged name")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=commands.cmd_bench)
+    b = bench_sub.add_parser("online", help="controller latency and rtf, learner off and on")
+    b.add_argument(
+        "--method", default="naive", choices=METHODS, help="online method (default: naive)"
+    )
+    b.add_argument("--repeat", type=int, default=3, help="off/on pairs (default: 3)")
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(func=commands.cmd_bench)
     b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")
     b.add_argument("--world", default="default")
     b.add_argument(
@@ -200,6 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--max-flight-s", type=_max_flight_s, default=900.0,
         help="end the flight (exit code 3) after this many simulated seconds (default 900)",
     )  # fmt: skip
+    add_online_options(p)
     add_record_options(p, world=True)
     p.set_defaults(func=commands.cmd_autopilot)
 
@@ -220,6 +231,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--identity", choices=["px4", "ardupilot"], default="px4")
     p.add_argument("-v", "--verbose", action="store_true", help="print the vehicle's messages")
+    p.add_argument(
+        "--param",
+        action="append",
+        metavar="NAME=VALUE",
+        default=[],
+        help="a vehicle parameter for this flight, repeatable (e.g. GFX_OL_LR=0.01)",
+    )
+    add_online_options(p)
     add_record_options(p)
     p.set_defaults(func=commands.cmd_fly)
 
@@ -246,6 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=commands.cmd_sitl)
 
     add_mission_parser(sub)
+    add_experiment_parser(sub)
 
     p = sub.add_parser("learn", help="gather data, train the ground-effect network, plot it")
     learn = p.add_subparsers(dest="action", required=True, metavar="ACTION")
@@ -272,6 +292,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--seed", type=int, default=0, help="first trial seed")
     e.add_argument("--json", action="store_true")
     e.set_defaults(func=commands.cmd_learn)
+    add_online_learn_parsers(learn, commands.cmd_learn)
     pl = learn.add_parser("plot", help="true against predicted f_ge,z over altitude")
     pl.add_argument("--network", default="rho1", help="model file or packaged name")
     pl.add_argument("--rho-list", default="1,2", help="rho values to draw (default: 1,2)")

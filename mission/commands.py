@@ -83,7 +83,9 @@ def _param_overrides(args: argparse.Namespace) -> dict[str, float]:
         out["GFX_GE_MODEL"] = float(MODEL_NAMES.index(model))
     if getattr(args, "rho", None) is not None:
         out["GFX_GE_RHO"] = args.rho
-    return out
+    from mission.online_cli import online_overrides
+
+    return out | online_overrides(args)
 
 
 def _flight_log_writer(args: argparse.Namespace) -> Any:
@@ -108,6 +110,7 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
     from autopilot.signing import Signing
     from autopilot.simlink import LinkLost, parse_url
     from mission.formats import load_mission_file
+    from mission.online_cli import online_options
     from mission.recordings import record_path
     from simbridge.vehicle import load_vehicle
     from simbridge.world import load_world
@@ -150,6 +153,7 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
         should_stop=lambda: bool(stop),
         on_step=_flight_log_writer(args),
         max_flight_s=args.max_flight_s,
+        online=online_options(args, reproducible=args.auto_start),
     )
 
     def on_signal(signum: int, frame: object) -> None:
@@ -200,7 +204,10 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
 
 def cmd_fly(args: argparse.Namespace) -> int:
     from mission.fly import describe, fly
+    from mission.online_cli import online_overrides, pass_through
 
+    online_overrides(args)  # refuse --online without --model neural before starting anything
+    extra = pass_through(args) + [a for p in args.param for a in ("--param", p)]
     speedup = "max" if args.speedup is None else f"{args.speedup:g}"
     summary = fly(
         args.mission,
@@ -214,6 +221,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
         via_gcs=not args.no_gcs,
         identity=args.identity,
         say=print if args.verbose else (lambda text: None),
+        autopilot_options=extra,
         record=False if args.no_record else (args.record or True),
     )
     print(json.dumps(summary) if args.json else describe(summary))
@@ -276,6 +284,10 @@ def cmd_learn(args: argparse.Namespace) -> int:
         for kind, path in paths.items():
             print(f"{kind}: {path}")
         return 0
+    if args.action in ("memory", "online-eval"):
+        from mission.online_cli import cmd_online_learn
+
+        return cmd_online_learn(args)
     if args.action == "evaluate":
         from mission.trials import evaluate_models
 
@@ -299,6 +311,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from learner.bench import bench_model
 
         result = bench_model(args.network)
+        print(
+            json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
+        )
+        return 0
+    if args.target == "online":
+        from mission.online_bench import bench_online
+
+        if args.repeat < 1:
+            raise ConfigError(f"--repeat: {args.repeat} must be at least 1")
+        result = bench_online(args.method, args.repeat)
         print(
             json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
         )

@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -64,6 +64,7 @@ def fly(
     flight_log: Path | None = None,
     record: bool | Path = True,
     max_flight_s: float | None = None,
+    autopilot_options: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line.
 
@@ -92,6 +93,7 @@ def fly(
     else:
         path = default_recording_path(mission_path, model) if record is True else record
         options += ["--record", str(path), "--record-world", str(resolve_world_path(world))]
+    options += autopilot_options  # e.g. the experiments' --online METHOD
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
     sim, port = start_sim(resolve_world_path(world), speedup=speedup, start=start)

@@ -31,7 +31,7 @@ def gather(
     # the simulator reads a file: write the world with rho_sim = rho beside the dataset
     world_path = out.with_suffix(".world.yaml")
     world_path.parent.mkdir(parents=True, exist_ok=True)
-    world_path.write_text(_with_rho(resolve_world_path(world).read_text(), rho))
+    world_path.write_text(world_yaml_with_rho(resolve_world_path(world).read_text(), rho))
     vehicle = load_vehicle(world_obj.vehicle)
     # about one waypoint per 1.5 s of flight: plenty for the samples asked
     o = world_obj.origin
@@ -86,7 +86,7 @@ def gather(
     return save_dataset(out, flight.samples, meta)
 
 
-def _with_rho(world_yaml: str, rho: float) -> str:
+def world_yaml_with_rho(world_yaml: str, rho: float) -> str:
     """The world file's text with its ground-effect rho replaced (or a ground effect added)."""
     data = yaml.safe_load(world_yaml)
     effects = [e for e in data.get("effects") or [] if e.get("name") != "ground_effect"]

@@ -1,0 +1,143 @@
+"""The flight loop's side of online learning: parameters in, samples to the learner, the
+current snapshot into the neural model.
+
+The GFX_OL_* parameters (autopilot/params.py) choose the method and its hyperparameters and
+may change in flight; GFX_OL_PAUSE pauses, GFX_OL_RESET = 1 resets to the offline weights
+(and reads 0 again). Learning needs the neural model: with another one it stays idle.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from autopilot.ground_models import GroundEffectModel, default_network
+from autopilot.params import ONLINE_METHODS, ParamStore
+from learner.dataset import COLUMNS, FEATURES, TARGETS
+from learner.online.memory import Memory, load_memory, memory_path_for
+from learner.online.names import NEEDS_MEMORY
+from simbridge.config import ConfigError
+
+# torch, and the learner with it, load only when learning is on: a flight without it
+# connects to the simulator as soon as before
+SAMPLE_HZ = 100.0  # thesis: samples at 100 Hz, an update per 64 (about 1.6 per second)
+Report = Callable[[float, float | None, int], None]  # (sim time, loss, version)
+
+_NAMES = list(COLUMNS)
+FEATURE_COLUMNS = np.array([_NAMES.index(f) for f in FEATURES])
+TARGET_COLUMNS = np.array([_NAMES.index(t) for t in TARGETS])
+
+
+@dataclass(frozen=True)
+class OnlineOptions:
+    deterministic: bool = True  # updates inside the control step: same sim times every run
+    save_path: Path | None = None  # the adapted model at the end of the flight
+    on_report: Report | None = None  # (sim time, loss, version) per update: the recorder
+    base: Any = None  # OnlineSettings the parameters do not cover (None: the defaults)
+
+
+def settings_from(params: ParamStore, base: Any = None) -> Any:
+    """The online settings (OnlineSettings) the parameters ask for; None when learning is off."""
+    p = params.online()
+    method = ONLINE_METHODS[p.method]
+    if method == "off":
+        return None
+    from learner.online.settings import OnlineSettings
+
+    return dataclasses.replace(
+        base if base is not None else OnlineSettings(),
+        method=method,
+        learning_rate=p.learning_rate,
+        penalty=p.penalty,
+        margin=p.margin,
+        forgetting=p.forgetting,
+    )
+
+
+def find_memory(network: str | Path | None, rho: float) -> Memory | None:
+    """The stored offline samples beside the model file, if there are any."""
+    from learner.model import resolve_model_path
+
+    path = memory_path_for(resolve_model_path(network or default_network(rho)))
+    return load_memory(path) if path.exists() else None
+
+
+class OnlineControl:
+    def __init__(
+        self, options: OnlineOptions, params: ParamStore, network: str | Path | None
+    ) -> None:
+        self.options = options
+        self.params = params
+        self.network = network
+        self.learner: Any = None  # autopilot.online_learner.OnlineLearner, once learning
+        self.active = False
+        self.errors: list[str] = []
+        settings = settings_from(params, options.base)
+        needs_memory = settings is not None and settings.method in NEEDS_MEMORY
+        # refuse at the start, not in flight: the memory must exist
+        if needs_memory and find_memory(network, params.model()[1]) is None:
+            assert settings is not None
+            raise ConfigError(
+                f"--online {settings.method}: needs stored offline samples beside the "
+                "network (NAME.memory.npz; make one with groundfx learn memory)"
+            )
+
+    @property
+    def sample_hz(self) -> float:
+        return SAMPLE_HZ if self.active else 0.0
+
+    def refresh(self, model: GroundEffectModel, t_s: float) -> None:
+        """After a parameter change: start, reconfigure, pause or reset the learner."""
+        settings = settings_from(self.params, self.options.base)
+        self.active = settings is not None and model.name == "neural"
+        if settings is None or not self.active:
+            return
+        p = self.params.online()
+        try:
+            if self.learner is None:
+                from autopilot.online_learner import OnlineLearner
+
+                memory = find_memory(self.network, self.params.model()[1])
+                self.learner = OnlineLearner(
+                    model.net,  # type: ignore[attr-defined]
+                    settings,
+                    memory,
+                    self.options.deterministic,
+                    self.options.on_report,
+                )
+            elif settings != self.learner.session.settings:
+                self.learner.configure(settings)
+        except ConfigError as err:  # e.g. ewc asked for in flight without a memory
+            self.errors.append(str(err))
+            self.active = False
+            return
+        self.learner.pause(bool(p.pause))
+        if p.reset:
+            self.learner.reset(t_s)
+            self.params.set("GFX_OL_RESET", 0.0)
+
+    def submit(self, row: tuple[float, ...]) -> None:
+        if self.active and self.learner is not None:
+            r = np.asarray(row)
+            self.learner.submit(r[FEATURE_COLUMNS], r[TARGET_COLUMNS], float(r[0]))
+
+    def apply(self, model: GroundEffectModel) -> None:
+        """The current snapshot into the neural model: one reference read per step."""
+        if self.active and self.learner is not None:
+            model.net = self.learner.snapshot.net  # type: ignore[attr-defined]
+
+    def close(self) -> dict[str, Any]:
+        """Stop the learner, save the adapted model if asked; the summary's online part."""
+        if self.learner is None:
+            return {"online_method": "off", "online_errors": self.errors} if self.errors else {}
+        self.learner.close()
+        out = self.learner.summary()
+        out["online_errors"] = self.errors + out["online_errors"]
+        if self.options.save_path is not None:
+            out["saved_model"] = str(self.learner.save(self.options.save_path))
+        return out

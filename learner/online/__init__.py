@@ -1,0 +1,1 @@
+"""Online learning: update rules, guards and weight snapshots (pure; no threads)."""

@@ -1,0 +1,248 @@
+"""The online update rules as pure functions: (weights, batch, settings, anchor) -> weights.
+
+Everything is in standardised units (the offline normaliser's): inputs, targets, losses.
+The gradient methods take `settings.steps` Adam steps on the batch, from fresh optimiser
+moments (no state survives an update but the weights), each followed by the exact Lipschitz
+projection; `rls` solves for the last layer in closed form and carries its covariance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from learner.online.settings import NEEDS_MEMORY, OnlineSettings
+
+Arrays = tuple[np.ndarray, ...]
+
+
+@dataclass(frozen=True)
+class Anchor:
+    """What the protecting methods hold on to: the offline weights, the diagonal Fisher
+    information of the offline data (ewc; normalised to mean 1, so that its lambda compares
+    with the constraint's) and stored offline samples (replay), standardised."""
+
+    weights: Arrays
+    biases: Arrays
+    fisher_weights: Arrays | None = None
+    fisher_biases: Arrays | None = None
+    memory_x: np.ndarray | None = None
+    memory_y: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class RlsState:
+    covariance: np.ndarray  # P over the last hidden layer's outputs and a constant 1
+
+
+@dataclass(frozen=True)
+class Update:
+    weights: Arrays
+    biases: Arrays
+    loss_before: float  # MSE of the batch's new samples, standardised, before the update
+    loss_after: float
+    rls: RlsState | None = None
+
+
+def _tensors(arrays: Arrays, grad: bool) -> list[torch.Tensor]:
+    return [torch.tensor(a, dtype=torch.float64, requires_grad=grad) for a in arrays]
+
+
+def forward(ws: list[torch.Tensor], bs: list[torch.Tensor], x: torch.Tensor) -> torch.Tensor:
+    h = x
+    for i, (w, b) in enumerate(zip(ws, bs, strict=True)):
+        h = h @ w.T + b
+        if i < len(ws) - 1:
+            h = torch.relu(h)
+    return h
+
+
+def forward_np(
+    weights: Arrays, biases: Arrays, x: np.ndarray, upto: int | None = None
+) -> np.ndarray:
+    """The network on standardised inputs; `upto`: stop after that many layers (features)."""
+    h = x
+    n = len(weights) if upto is None else upto
+    for i in range(n):
+        h = h @ weights[i].T + biases[i]
+        if i < len(weights) - 1:
+            h = np.maximum(h, 0.0)
+    return h
+
+
+def mse(weights: Arrays, biases: Arrays, x: np.ndarray, y: np.ndarray) -> float:
+    return float(np.mean((forward_np(weights, biases, x) - y) ** 2))
+
+
+@torch.no_grad()
+def _project(ws: list[torch.Tensor], bound: float) -> None:
+    """Every weight matrix back to spectral norm <= bound (exact, by SVD): equation 2.33."""
+    for w in ws:
+        sigma = torch.linalg.matrix_norm(w, ord=2)
+        if sigma > bound:
+            w.mul_(bound / sigma)
+
+
+def project_weights(weights: Arrays, bound: float) -> Arrays:
+    out = []
+    for w in weights:
+        sigma = float(np.linalg.norm(w, ord=2))
+        out.append(w * (bound / sigma) if sigma > bound else w.copy())
+    return tuple(out)
+
+
+def _penalty_terms(
+    settings: OnlineSettings, anchor: Anchor
+) -> tuple[list[torch.Tensor], list[torch.Tensor] | None] | None:
+    """The anchor as tensors, once per update: offline weights and (ewc) their Fisher."""
+    if settings.method not in ("constraint", "margin", "ewc") or settings.penalty == 0.0:
+        return None
+    refs = [torch.tensor(np.array(a)) for a in (*anchor.weights, *anchor.biases)]
+    if settings.method != "ewc":
+        return refs, None
+    assert anchor.fisher_weights is not None and anchor.fisher_biases is not None
+    fisher = [torch.tensor(np.array(f)) for f in (*anchor.fisher_weights, *anchor.fisher_biases)]
+    return refs, fisher
+
+
+def _penalty(
+    params: list[torch.Tensor],
+    terms: tuple[list[torch.Tensor], list[torch.Tensor] | None],
+    settings: OnlineSettings,
+) -> torch.Tensor:
+    """constraint: lambda sum (w - w0)^2; margin: lambda sum max(|w - w0| - m, 0)^2;
+    ewc: lambda sum F (w - w0)^2."""
+    refs, fisher = terms
+    total = torch.zeros((), dtype=torch.float64)
+    for k, (p, ref) in enumerate(zip(params, refs, strict=True)):
+        d = p - ref
+        if settings.method == "margin":
+            d = torch.relu(d.abs() - settings.margin)
+        total = total + ((fisher[k] * d * d) if fisher is not None else d * d).sum()
+    return settings.penalty * total
+
+
+def gradient_update(
+    weights: Arrays,
+    biases: Arrays,
+    x: np.ndarray,
+    y: np.ndarray,
+    settings: OnlineSettings,
+    anchor: Anchor,
+    update_index: int = 0,
+) -> Update:
+    """`naive`, `constraint`, `margin`, `ewc`, `replay`: Adam on MSE + penalty."""
+    loss_before = mse(weights, biases, x, y)
+    xb, yb = x, y
+    if settings.method == "replay" and settings.replay_samples > 0:
+        assert anchor.memory_x is not None and anchor.memory_y is not None
+        rng = np.random.default_rng((settings.seed, update_index))
+        pick = rng.choice(len(anchor.memory_x), size=settings.replay_samples, replace=True)
+        xb = np.concatenate([x, anchor.memory_x[pick]])
+        yb = np.concatenate([y, anchor.memory_y[pick]])
+    ws, bs = _tensors(weights, True), _tensors(biases, True)
+    xt = torch.as_tensor(xb, dtype=torch.float64)
+    yt = torch.as_tensor(yb, dtype=torch.float64)
+    terms = _penalty_terms(settings, anchor)
+    optimiser = torch.optim.Adam(ws + bs, lr=settings.learning_rate, foreach=True)
+    for _ in range(settings.steps):
+        optimiser.zero_grad()
+        loss = torch.mean((forward(ws, bs, xt) - yt) ** 2)
+        if terms is not None:
+            loss = loss + _penalty(ws + bs, terms, settings)
+        loss.backward()
+        optimiser.step()
+    _project(ws, settings.layer_bound)  # the Lipschitz bound, re-applied after the update
+    new_w = tuple(w.detach().numpy().copy() for w in ws)
+    new_b = tuple(b.detach().numpy().copy() for b in bs)
+    return Update(new_w, new_b, loss_before, mse(new_w, new_b, x, y))
+
+
+def initial_rls(weights: Arrays, settings: OnlineSettings) -> RlsState:
+    n = weights[-1].shape[1] + 1
+    return RlsState(np.eye(n) * settings.rls_initial_covariance)
+
+
+def rls_update(
+    weights: Arrays,
+    biases: Arrays,
+    x: np.ndarray,
+    y: np.ndarray,
+    settings: OnlineSettings,
+    state: RlsState,
+) -> Update:
+    """Recursive least squares on the last layer, sample by sample, with forgetting factor
+    lambda: the hidden layers stay the offline features; [W b] of the last layer is the
+    estimate, P its covariance (Neural-Fly's adaptation, in discrete form)."""
+    loss_before = mse(weights, biases, x, y)
+    phi_all = forward_np(weights, biases, x, upto=len(weights) - 1)
+    phi_all = np.concatenate([phi_all, np.ones((len(x), 1))], axis=1)
+    theta = np.concatenate([weights[-1], biases[-1][:, None]], axis=1)  # (3, n + 1)
+    p = state.covariance.copy()
+    lam = settings.forgetting
+    max_trace = settings.rls_initial_covariance * len(p)
+    for phi, target in zip(phi_all, y, strict=True):
+        p_phi = p @ phi
+        gain = p_phi / (lam + phi @ p_phi)
+        theta = theta + np.outer(target - theta @ phi, gain)
+        p = (p - np.outer(gain, p_phi)) / lam
+        p = 0.5 * (p + p.T)  # keep it symmetric against rounding
+    trace = float(np.trace(p))
+    if trace > max_trace:  # bounded covariance: forgetting without excitation winds P up
+        p *= max_trace / trace
+    last_w = project_weights((theta[:, :-1],), settings.layer_bound)[0]
+    new_w = (*weights[:-1], last_w)
+    new_b = (*biases[:-1], theta[:, -1].copy())
+    return Update(new_w, new_b, loss_before, mse(new_w, new_b, x, y), RlsState(p))
+
+
+def update(
+    weights: Arrays,
+    biases: Arrays,
+    x: np.ndarray,
+    y: np.ndarray,
+    settings: OnlineSettings,
+    anchor: Anchor,
+    rls: RlsState | None = None,
+    update_index: int = 0,
+) -> Update:
+    """One online update with the method `settings.method` on a standardised batch."""
+    if settings.method in NEEDS_MEMORY and anchor.memory_x is None:
+        raise ValueError(f"online method {settings.method!r} needs offline samples (memory)")
+    if settings.method == "rls":
+        return rls_update(
+            weights,
+            biases,
+            x,
+            y,
+            settings,
+            rls if rls is not None else initial_rls(weights, settings),
+        )
+    return gradient_update(weights, biases, x, y, settings, anchor, update_index)
+
+
+def diagonal_fisher(
+    weights: Arrays, biases: Arrays, x: np.ndarray, y: np.ndarray
+) -> tuple[Arrays, Arrays]:
+    """The empirical diagonal Fisher information of the (standardised) offline samples: the
+    mean squared per-sample gradient of the squared error, normalised to mean 1."""
+    from torch.func import grad, vmap
+
+    params = tuple(torch.tensor(a, dtype=torch.float64) for a in (*weights, *biases))
+    n = len(weights)
+
+    def sample_loss(
+        ps: tuple[torch.Tensor, ...], xi: torch.Tensor, yi: torch.Tensor
+    ) -> torch.Tensor:
+        out = forward(list(ps[:n]), list(ps[n:]), xi[None, :])[0]
+        return torch.sum((out - yi) ** 2)
+
+    grads = vmap(grad(sample_loss), in_dims=(None, 0, 0))(
+        params, torch.as_tensor(x, dtype=torch.float64), torch.as_tensor(y, dtype=torch.float64)
+    )
+    fisher = [(g**2).mean(dim=0).numpy() for g in grads]
+    scale = np.mean(np.concatenate([f.ravel() for f in fisher]))
+    fisher = [f / scale if scale > 0 else np.ones_like(f) for f in fisher]
+    return tuple(fisher[:n]), tuple(fisher[n:])

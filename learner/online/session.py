@@ -1,0 +1,159 @@
+"""One flight's online learning, without threads or clocks: samples in, snapshots out.
+
+Each new sample is standardised with the offline normaliser; every `holdout_every`-th goes
+to the guard's buffer of recent held-back samples instead of training; once `batch_size`
+training samples have arrived the method updates the weights, the guards judge the result,
+and an accepted update becomes the next snapshot (version + 1). The caller (the autopilot's
+learner thread, or the control loop itself in deterministic mode) owns the timing.
+"""
+
+from __future__ import annotations
+
+import collections
+from dataclasses import asdict, replace
+from typing import Any
+
+import numpy as np
+
+from learner.model import GroundEffectNet
+from learner.online.guards import check_update
+from learner.online.memory import Memory
+from learner.online.methods import Anchor, RlsState, diagonal_fisher, update
+from learner.online.settings import NEEDS_MEMORY, OnlineSettings
+from learner.online.snapshot import Snapshot, make_snapshot
+from learner.train import OUTLIER_RANGE_N
+from simbridge.config import ConfigError
+
+
+class OnlineSession:
+    def __init__(
+        self, base: GroundEffectNet, settings: OnlineSettings, memory: Memory | None = None
+    ) -> None:
+        self.base = base
+        self.memory = memory
+        n = base.normaliser
+        self._x_mean, self._x_std, self._y_mean, self._y_std = n.x_mean, n.x_std, n.y_mean, n.y_std
+        self.target_scale_n = float(np.max(n.y_std))
+        self._anchor = Anchor(tuple(base.weights), tuple(base.biases))
+        self.settings = settings
+        self.snapshot = Snapshot(0, base, 0.0)
+        self._x: list[np.ndarray] = []
+        self._y: list[np.ndarray] = []
+        self._holdout: collections.deque[tuple[np.ndarray, np.ndarray]] = collections.deque(
+            maxlen=settings.holdout_size
+        )
+        self._rls: RlsState | None = None
+        self._seen = 0
+        self.counts = collections.Counter[str]()
+        self.reject_reasons = collections.Counter[str]()
+        self.last_loss: float | None = None
+        self.configure(settings)
+
+    def configure(self, settings: OnlineSettings) -> None:
+        """New method or hyperparameters (MAVLink parameters changed in flight)."""
+        if settings.method in NEEDS_MEMORY and self.memory is None:
+            raise ConfigError(
+                f"online method {settings.method!r} needs stored offline samples: a "
+                "NAME.memory.npz beside the model file (groundfx learn memory)"
+            )
+        if settings.method != self.settings.method:
+            self._rls = None
+        self.settings = settings
+        if self._holdout.maxlen != settings.holdout_size:
+            self._holdout = collections.deque(self._holdout, maxlen=settings.holdout_size)
+        a = self._anchor
+        if settings.method in NEEDS_MEMORY and a.memory_x is None:
+            assert self.memory is not None
+            mx, my = self._standardise(self.memory.x, self.memory.y)
+            a = replace(a, memory_x=mx, memory_y=my)
+        if settings.method == "ewc" and a.fisher_weights is None:
+            assert a.memory_x is not None and a.memory_y is not None
+            fw, fb = diagonal_fisher(a.weights, a.biases, a.memory_x, a.memory_y)
+            a = replace(a, fisher_weights=fw, fisher_biases=fb)
+        self._anchor = a
+
+    def _standardise(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (x - self._x_mean) / self._x_std, (y - self._y_mean) / self._y_std
+
+    def add(self, features: np.ndarray, target_n: np.ndarray, t_s: float) -> Snapshot | None:
+        """One sample (12 features, f_ge of equation 3.16 [N]); the new snapshot if this
+        sample completed a batch whose update was accepted."""
+        lo, hi = OUTLIER_RANGE_N
+        if not (lo <= target_n[2] <= hi) or not (
+            np.all(np.isfinite(features)) and np.all(np.isfinite(target_n))
+        ):
+            self.counts["outliers"] += 1  # as offline training drops them (thesis 3.5.2)
+            return None
+        x, y = self._standardise(np.asarray(features, float), np.asarray(target_n, float))
+        self._seen += 1
+        self.counts["samples"] += 1
+        if self._seen % self.settings.holdout_every == 0:
+            self._holdout.append((x, y))
+            return None
+        self._x.append(x)
+        self._y.append(y)
+        if len(self._x) < self.settings.batch_size:
+            return None
+        bx, by = np.array(self._x), np.array(self._y)
+        self._x, self._y = [], []
+        return self._update(bx, by, t_s)
+
+    def _update(self, bx: np.ndarray, by: np.ndarray, t_s: float) -> Snapshot | None:
+        s = self.snapshot
+        old = (tuple(s.net.weights), tuple(s.net.biases))
+        self.counts["updates"] += 1
+        try:
+            with np.errstate(all="ignore"):
+                result = update(
+                    *old, bx, by, self.settings, self._anchor, self._rls, self.counts["updates"]
+                )
+        except (FloatingPointError, np.linalg.LinAlgError, RuntimeError) as err:
+            return self._reject(f"update failed ({type(err).__name__})")
+        self.last_loss = result.loss_before
+        hx = np.array([h[0] for h in self._holdout]).reshape(-1, len(self._x_mean))
+        hy = np.array([h[1] for h in self._holdout]).reshape(-1, len(self._y_mean))
+        verdict = check_update(
+            old, (result.weights, result.biases), bx, hx, hy, self.target_scale_n, self.settings
+        )
+        if not verdict.accepted:
+            return self._reject(verdict.reason)
+        self._rls = result.rls
+        self.counts["accepted"] += 1
+        self.snapshot = make_snapshot(
+            s.version + 1,
+            result.weights,
+            result.biases,
+            self.base.normaliser,
+            self.adapted_header(),
+            t_s,
+            result.loss_before,
+        )
+        return self.snapshot
+
+    def _reject(self, reason: str) -> None:
+        self.counts["rejected"] += 1
+        # the kind of reason, without its numbers, so that counts add up
+        self.reject_reasons[reason.split(" ")[0] + (" RMSE" if "RMSE" in reason else "")] += 1
+        return None
+
+    def reset(self, t_s: float) -> Snapshot:
+        """Back to the offline weights (a new version, so readers see the change)."""
+        self._x, self._y = [], []
+        self._holdout.clear()
+        self._rls = None
+        self.counts["resets"] += 1
+        self.snapshot = Snapshot(self.snapshot.version + 1, self.base, t_s)
+        return self.snapshot
+
+    def adapted_header(self) -> dict[str, Any]:
+        """The model file's header for the current snapshot: where it came from, how."""
+        return {
+            **self.base.header,
+            "online": {
+                "settings": asdict(self.settings),
+                "version": self.snapshot.version,
+                "updates": self.counts["updates"],
+                "accepted": self.counts["accepted"],
+                "samples": self.counts["samples"],
+            },
+        }

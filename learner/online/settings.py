@@ -1,0 +1,79 @@
+"""The online methods by name and their hyperparameters (DESIGN.md "Learning").
+
+Thesis section 3.5.3: `naive` (the offline loss on each new batch), `constraint` (plus a
+penalty on the deviation of every weight from its offline value), `margin` (the penalty only
+on the part of the deviation beyond a margin). Beyond the thesis: `ewc` (the deviation
+weighted by the diagonal Fisher information of the offline data, Kirkpatrick et al. 2017),
+`replay` (stored offline samples mixed into each batch) and `rls` (recursive least squares
+on the last layer with a forgetting factor, as Neural-Fly adapts its last layer).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from learner.network import DEFAULT_LAYER_BOUND
+from learner.online.names import METHODS, NEEDS_MEMORY, PROTECTING
+from simbridge.config import ConfigError, param, range_text
+
+__all__ = ["METHODS", "NEEDS_MEMORY", "PROTECTING", "OnlineSettings", "check_settings"]
+
+
+@dataclass(frozen=True)
+class OnlineSettings:
+    """One online method and its hyperparameters. Losses are in standardised target units
+    (the offline normaliser), penalties in weight units."""
+
+    method: str = "naive"
+    batch_size: int = param(64, lo=8, hi=4096, doc="new samples per update (thesis: 64)")
+    learning_rate: float = param(
+        1e-3, lo=0.0, hi=1.0, lo_open=True, doc="Adam step size of the gradient methods"
+    )
+    steps: int = param(10, lo=1, hi=1000, doc="Adam steps on each batch")
+    penalty: float = param(
+        1.0, lo=0.0, hi=1e6, doc="lambda: weight of the constraint, margin or EWC penalty"
+    )
+    margin: float = param(0.02, lo=0.0, hi=10.0, doc="free deviation of each weight (margin)")
+    forgetting: float = param(
+        0.95, lo=0.5, hi=1.0, doc="RLS forgetting factor per sample (1: remember all)"
+    )
+    rls_initial_covariance: float = param(
+        1.0, lo=0.0, hi=1e6, lo_open=True, doc="RLS: the initial covariance P0 = p0 I"
+    )
+    replay_samples: int = param(64, lo=0, hi=4096, doc="offline samples mixed into a batch")
+    layer_bound: float = param(
+        DEFAULT_LAYER_BOUND, lo=0.0, hi=100.0, lo_open=True, doc="spectral norm bound per layer"
+    )
+    holdout_every: int = param(
+        8, lo=2, hi=1000, doc="every k-th new sample is held back for the guard"
+    )
+    holdout_size: int = param(64, lo=1, hi=4096, doc="recent held-back samples the guard uses")
+    guard_ratio: float = param(
+        1.5, lo=1.0, hi=1e6, doc="reject an update whose held-back RMSE exceeds ratio x before"
+    )
+    guard_slack_n: float = param(
+        5e-4, unit="N", lo=0.0, hi=10.0, doc="... plus this much (noise allowance)"
+    )
+    seed: int = param(0, lo=0, hi=2**31 - 1, doc="replay draws")
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+
+
+def check_settings(settings: OnlineSettings) -> None:
+    """A clear error naming the field and its range, never a traceback."""
+    if settings.method not in METHODS:
+        raise ConfigError(
+            f"--online: unknown method {settings.method!r}; choose one of {', '.join(METHODS)}"
+        )
+    for f in dataclasses.fields(settings):
+        if f.name == "method":
+            continue
+        value = getattr(settings, f.name)
+        lo, hi = f.metadata["lo"], f.metadata["hi"]
+        low_ok = value > lo if f.metadata["lo_open"] else value >= lo
+        if not (low_ok and value <= hi):
+            raise ConfigError(
+                f"online {f.name}: {value!r} is outside the allowed range {range_text(f)}"
+            )

@@ -1,0 +1,1 @@
+"""The thesis's experiments (chapter 4): definitions, campaigns, reports."""

@@ -1,0 +1,236 @@
+"""Online learning: the update rules, guards and snapshots, the learner thread, the options."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from autopilot.online_learner import OnlineLearner
+from autopilot.params import ParamStore, check_value
+from learner.model import load_model
+from learner.online.guards import check_update
+from learner.online.memory import load_memory
+from learner.online.methods import Anchor, forward_np, update
+from learner.online.session import OnlineSession
+from learner.online.settings import METHODS, OnlineSettings
+from simbridge.config import ConfigError
+from tests.helpers import REPO, run_groundfx
+
+torch.set_num_threads(1)  # as the learner thread does: a tiny network, two shared cores
+
+BASE = load_model("rho1")
+MEMORY = load_memory(REPO / "learner" / "models" / "rho1.memory.npz")
+
+
+def shifted_batch(n: int = 64, shift_n: float = 0.02, seed: int = 0):
+    """Offline samples whose f_ge,z is `shift_n` stronger: a world the network has not seen."""
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(len(MEMORY.x), n, replace=False)
+    x, y = MEMORY.x[pick], MEMORY.y[pick].copy()
+    y[:, 2] += shift_n
+    return x, y
+
+
+def standardised(x, y):
+    n = BASE.normaliser
+    return (x - n.x_mean) / n.x_std, (y - n.y_mean) / n.y_std
+
+
+def anchor(settings: OnlineSettings) -> Anchor:
+    session = OnlineSession(BASE, settings, MEMORY)
+    return session._anchor
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_every_method_learns_a_shift_and_keeps_the_lipschitz_bound(method):
+    settings = OnlineSettings(method=method, learning_rate=3e-2)  # large steps push the norms
+    x, y = standardised(*shifted_batch())
+    w, b = tuple(BASE.weights), tuple(BASE.biases)
+    result = update(w, b, x, y, settings, anchor(settings))
+    assert result.loss_after < 0.8 * result.loss_before
+    norms = [np.linalg.norm(m, ord=2) for m in result.weights]
+    assert max(norms) <= settings.layer_bound + 1e-9
+    assert not np.array_equal(result.weights[-1], w[-1])
+
+
+def test_the_protecting_penalties_hold_the_weights_near_the_offline_ones():
+    x, y = standardised(*shifted_batch())
+    w, b = tuple(BASE.weights), tuple(BASE.biases)
+
+    fisher = anchor(OnlineSettings(method="ewc")).fisher_weights
+
+    def moved(weigh: bool = False, **kw) -> float:
+        s = OnlineSettings(learning_rate=1e-2, steps=40, **kw)
+        r = update(w, b, x, y, s, anchor(s))
+        f = fisher if weigh else [1.0] * len(w)
+        return float(sum(np.sum(k * (n - o) ** 2) for k, n, o in zip(f, r.weights, w, strict=True)))
+
+    naive = moved(method="naive")
+    assert moved(method="constraint", penalty=100.0) < 0.3 * naive
+    # ewc frees the weights the offline data does not care about: its own distance shrinks
+    assert moved(True, method="ewc", penalty=100.0) < 0.3 * moved(True, method="naive")
+    # a margin wider than any step: free like naive; a zero margin: the constraint
+    assert moved(method="margin", penalty=100.0, margin=10.0) == pytest.approx(naive, rel=1e-6)
+    assert moved(method="margin", penalty=100.0, margin=0.0) < 0.3 * naive
+
+
+def test_updates_are_reproducible_to_the_bit():
+    x, y = shifted_batch(300)
+
+    def run(method: str):
+        s = OnlineSession(BASE, OnlineSettings(method=method), MEMORY)
+        for k in range(len(x)):
+            s.add(x[k], y[k], k * 0.01)
+        return s.snapshot
+
+    for method in ("naive", "replay", "rls"):
+        a, b = run(method), run(method)
+        assert a.version == b.version > 0
+        assert all(np.array_equal(p, q) for p, q in zip(a.net.weights, b.net.weights, strict=True))
+
+
+def test_guards_reject_non_finite_and_worse_updates_and_keep_the_snapshot():
+    s = OnlineSettings()
+    x, y = standardised(*shifted_batch())
+    old = (tuple(BASE.weights), tuple(BASE.biases))
+    broken = (tuple(w * np.nan for w in BASE.weights), old[1])
+    assert check_update(old, broken, x, x, y, 0.026, s).reason == "non-finite weights"
+    rng = np.random.default_rng(1)
+    noise = (tuple(w + rng.normal(0, 1, w.shape) for w in BASE.weights), old[1])
+    verdict = check_update(old, noise, x, x[:16], y[:16], 0.026, s)
+    assert not verdict.accepted and "held-back RMSE" in verdict.reason
+    # in a session: an absurd learning rate overfits pure noise; the guard keeps the weights
+    strict = OnlineSettings(learning_rate=0.3, steps=20, guard_ratio=1.0, guard_slack_n=0.0)
+    session = OnlineSession(BASE, strict, MEMORY)
+    xs, _ = shifted_batch(600, shift_n=0.0)
+    ys = np.random.default_rng(4).uniform(0.0, 1.0, (600, 3))
+    for k in range(len(xs)):
+        session.add(xs[k], ys[k], k * 0.01)
+    assert session.counts["rejected"] > 0
+    assert session.counts["accepted"] + session.counts["rejected"] == session.counts["updates"]
+    assert session.snapshot.version == session.counts["accepted"]
+    pred = forward_np(tuple(session.snapshot.net.weights), tuple(session.snapshot.net.biases), xs)
+    assert np.all(np.isfinite(pred))
+
+
+def test_the_thread_never_blocks_the_caller_drops_when_full_and_publishes_versions():
+    x, y = shifted_batch(2000, seed=2)
+    learner = OnlineLearner(
+        BASE, OnlineSettings(steps=50), MEMORY, deterministic=False, queue_size=8
+    )
+    worst = 0.0
+    for k in range(len(x)):
+        t0 = time.perf_counter()
+        learner.submit(x[k], y[k], k * 0.01)
+        worst = max(worst, time.perf_counter() - t0)
+        if k % 16 == 0:
+            time.sleep(0.002)  # the thread drains 16 samples in far less, an update takes longer
+    learner.close()
+    summary = learner.summary()
+    assert summary["online_dropped"] > 0  # an update takes far longer than 8 submissions
+    assert (
+        summary["online_samples"] + summary["online_dropped"] + summary["online_outliers"] == 2000
+    )
+    assert learner.snapshot.version == summary["online_accepted"] > 0
+    assert not learner.snapshot.net.weights[0].flags.writeable  # immutable snapshot
+    assert worst < 0.05  # put_nowait: no waiting on the learner (generous: a loaded machine)
+
+
+def test_pause_and_reset_return_to_the_offline_weights():
+    x, y = shifted_batch(400, seed=3)
+    learner = OnlineLearner(BASE, OnlineSettings(), MEMORY, deterministic=True)
+    for k in range(200):
+        learner.submit(x[k], y[k], k * 0.01)
+    adapted = learner.snapshot
+    assert adapted.version > 0 and adapted.net is not BASE
+    learner.pause(True)
+    for k in range(200, 400):
+        learner.submit(x[k], y[k], k * 0.01)
+    assert learner.snapshot is adapted and learner.ignored_paused == 200
+    learner.reset(4.0)
+    assert learner.snapshot.net is BASE and learner.snapshot.version == adapted.version + 1
+
+
+def test_online_parameters_have_ranges_and_the_options_clear_errors(tmp_path):
+    assert "GFX_OL_FORGET: 1.5 is outside the allowed range [0.5, 1]" in (
+        check_value("GFX_OL_FORGET", 1.5) or ""
+    )
+    assert check_value("GFX_OL_METHOD", 7) is not None
+    store = ParamStore(None, {"GFX_OL_METHOD": 6, "GFX_OL_FORGET": 0.9})
+    assert store.online().method == 6 and store.online().forgetting == pytest.approx(0.9)
+    with pytest.raises(ConfigError, match="online steps: 0 is outside the allowed range"):
+        dataclasses.replace(OnlineSettings(), steps=0)
+    with pytest.raises(ConfigError, match="unknown method 'sgd'"):
+        OnlineSettings(method="sgd")
+    r = run_groundfx("fly", "mission/examples/hover.yaml", "--model", "analytic", "--online", "rls")
+    assert r.returncode == 2 and "--online rls: needs --model neural" in r.stderr
+    r = run_groundfx(
+        "autopilot",
+        "--sim",
+        "tcp:127.0.0.1:9",
+        "--model",
+        "neural",
+        "--network",
+        "rho2",
+        "--online",
+        "ewc",
+        "--no-gcs",
+        "--params-file",
+        "none",
+    )
+    assert r.returncode == 2 and "--online ewc: needs stored offline samples" in r.stderr
+
+
+def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_paused(tmp_path):
+    import yaml
+
+    from autopilot.recording import read_recording
+    from mission.fly import fly
+    from mission.trials import landing_trial
+
+    data, start = landing_trial(0)
+    data["waypoints"][-1]["hold_s"] = 3.0
+    mission = tmp_path / "landing.yaml"
+    mission.write_text(yaml.safe_dump(data))
+
+    def flight(*extra: str, record: bool | Path = False) -> dict:
+        return fly(
+            mission,
+            "rho2",
+            "neural",
+            network="rho1",
+            start=start,
+            via_gcs=False,
+            record=record,
+            autopilot_options=extra,
+        )
+
+    saved, rrd = tmp_path / "adapted.npz", tmp_path / "a.rrd"
+    a = flight("--online", "rls", "--save-model", str(saved), record=rrd)
+    b = flight("--online", "rls")
+    assert a["landed"] and a["online_mode"] == "deterministic"
+    assert a["online_version"] == a["online_accepted"] > 3
+    assert a["online_accepted"] + a["online_rejected"] == a["online_updates"]
+    assert a["online_dropped"] == 0
+    # deterministic: updates at the same simulated times, so the same flight to the bit. A
+    # process starved at its start (a loaded machine) can arm while the simulator still holds
+    # the vehicle on its stand, which changes the flight: then a third flight decides.
+    shas = {a["trajectory_sha256"], b["trajectory_sha256"]}
+    if len(shas) > 1:
+        assert flight("--online", "rls")["trajectory_sha256"] in shas
+    adapted = load_model(saved)
+    assert adapted.header["online"]["settings"]["method"] == "rls"
+    assert adapted.header["online"]["version"] == a["online_version"]
+    assert not np.array_equal(adapted.weights[-1], BASE.weights[-1])
+    assert np.array_equal(adapted.weights[0], BASE.weights[0])  # rls: the last layer only
+    # the recording has the learner's loss and the version the controller used
+    _, versions = read_recording(rrd).scalars("plots/learner/version")
+    assert versions[-1, 0] == a["online_version"] and np.all(np.diff(versions[:, 0]) >= 0)
+    assert len(read_recording(rrd).scalars("plots/learner/loss")[0]) == a["online_updates"]
+    paused = flight("--online", "naive", "--param", "GFX_OL_PAUSE=1")
+    assert paused["online_version"] == 0 and paused["online_ignored_paused"] > 100
