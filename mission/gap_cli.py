@@ -10,8 +10,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-from learner.gap.logs import read_log
-from mission.gap_flights import fly_log
 from simbridge.config import ConfigError
 
 
@@ -52,7 +50,7 @@ def run_diagnosis(
 ) -> dict[str, Any]:
     """Diagnose, replay held-out missions closed-loop, write every output; the figures."""
     from learner.gap.diagnose import diagnose
-    from learner.gap.logs import load_mapping
+    from learner.gap.logs import load_mapping, read_log
     from learner.gap.report import corrected_world_yaml, figures, write_outputs
     from simbridge.vehicle import load_vehicle
     from simbridge.world import load_world, resolve_world_path
@@ -82,7 +80,9 @@ def run_diagnosis(
 def replay_missions(logs: list, nominal: Path, corrected: Path, out: Path) -> dict | None:
     """Fly each held-out log's mission in the nominal and the corrected world; the RMS
     tracking difference to the logged flight before and after."""
+    from learner.gap.logs import read_log
     from learner.gap.rollout import shrink, tracking_difference_m
+    from mission.gap_flights import fly_log
 
     before, after = [], []
     for log in logs:
