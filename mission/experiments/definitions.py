@@ -123,6 +123,11 @@ def _c(name: str, label: str, trials: int, *flights: Flight, group: str = "") ->
 # `none` flies long (without a model the landing waits ~65 simulated seconds for the sinking
 # setpoint to overcome the ground effect) and alike (spread 0.01 mm): few trials measure it.
 BASELINE_TRIALS = 2
+# Online learning runs a torch update per 64 samples and 4.4 flies two flights per trial:
+# with six methods in 4.4 and 4.5, two trials per method keep `all` within 15 minutes on two cores; --trials N
+# asks for more.
+ONLINE_TRIALS = 3
+METHOD_TRIALS = 2
 NEAREST = {0.5: "rho1", 1.0: "rho1", 1.5: "rho1", 2.0: "rho2", 3.0: "rho2", 4.0: "rho2"}
 
 
@@ -177,8 +182,8 @@ def _offline_vs_online() -> Experiment:
         f = Flight(rho_sim=rho, network="rho1")
         g = f"rho_sim {rho:g}"
         conditions += [
-            _c(f"offline@{rho:g}", f"rho1 offline at {rho:g}", 4, f, group=g),
-            _c(f"online@{rho:g}", f"rho1 + naive online at {rho:g}", 4,
+            _c(f"offline@{rho:g}", f"rho1 offline at {rho:g}", ONLINE_TRIALS, f, group=g),
+            _c(f"online@{rho:g}", f"rho1 + naive online at {rho:g}", ONLINE_TRIALS,
                dataclasses.replace(f, online="naive"), group=g),
         ]  # fmt: skip
     return Experiment(
@@ -196,11 +201,11 @@ def _offline_vs_online() -> Experiment:
 
 def _remembering() -> Experiment:
     back = Flight(rho_sim=1.0, network="rho1")
-    conditions = [_c("never-adapted", "rho1 at 1, not adapted", 3, back)]
+    conditions = [_c("never-adapted", "rho1 at 1, not adapted", METHOD_TRIALS, back)]
     for method in ONLINE_METHODS:
         adapt = Flight(rho_sim=2.0, network="rho1", online=method)
         conditions.append(
-            _c(method, f"adapted at 2 by {method}, back at 1", 3, adapt,
+            _c(method, f"adapted at 2 by {method}, back at 1", METHOD_TRIALS, adapt,
                dataclasses.replace(back, carry_network=True))
         )  # fmt: skip
     return Experiment(
@@ -218,9 +223,10 @@ def _remembering() -> Experiment:
 
 def _online_methods() -> Experiment:
     f = Flight(rho_sim=2.0, network="rho1")
-    conditions = [_c("offline", "rho1 offline", 3, f)]
+    conditions = [_c("offline", "rho1 offline", METHOD_TRIALS, f)]
     conditions += [
-        _c(m, f"rho1 + {m}", 3, dataclasses.replace(f, online=m)) for m in ONLINE_METHODS
+        _c(m, f"rho1 + {m}", METHOD_TRIALS, dataclasses.replace(f, online=m))
+        for m in ONLINE_METHODS
     ]
     return Experiment(
         "4.5",
