@@ -124,8 +124,8 @@ def _c(name: str, label: str, trials: int, *flights: Flight, group: str = "") ->
 # setpoint to overcome the ground effect) and alike (spread 0.01 mm): few trials measure it.
 BASELINE_TRIALS = 2
 # Online learning runs a torch update per 64 samples and 4.4 flies two flights per trial:
-# with six methods in 4.4 and 4.5, two trials per method keep `all` within 15 minutes on two cores; --trials N
-# asks for more.
+# with six methods in 4.4 and 4.5, two trials per method keep `all` within 15 minutes on
+# two cores; --trials N asks for more.
 ONLINE_TRIALS = 3
 METHOD_TRIALS = 2
 NEAREST = {0.5: "rho1", 1.0: "rho1", 1.5: "rho1", 2.0: "rho2", 3.0: "rho2", 4.0: "rho2"}
