@@ -146,6 +146,10 @@ def limited_setpoint(
     dx, dy, dz = (target[0] - position[0], target[1] - position[1], target[2] - position[2])
     horizontal = math.hypot(dx, dy)
     reach = horizontal_m_s * lead_s
+    if horizontal <= reach and -down_m_s * lead_s <= dz <= up_m_s * lead_s:
+        # the target itself, not position + (target - position), which rounding leaves a few
+        # ulp off: the waypoint timeout starts when the setpoint equals the target
+        return target
     if horizontal > reach:
         dx, dy = dx * reach / horizontal, dy * reach / horizontal
     dz = min(dz, up_m_s * lead_s) if dz > 0.0 else max(dz, -down_m_s * lead_s)

@@ -19,6 +19,7 @@ import rerun as rr
 
 from autopilot.blueprint import default_blueprint
 from autopilot.controller import ControlOutput, FlightState, Setpoint
+from autopilot.flight_log import kinematic_acceleration_m_s2
 from autopilot.mission_items import PlanStep
 from autopilot.recorder import FLUSH_WALL_S, RecordOptions
 from autopilot.recorder_rows import RowSender, scalars_key
@@ -156,6 +157,8 @@ class FlightRecorder:
                 *true_ge,
                 *actual,
                 *desired,
+                *state.angular_velocity_body_rad_s,
+                *(kinematic_acceleration_m_s2(msgs, state) if "xacc" in msgs.sensor else NAN3),
             )
         )
         self._last_t = t_s

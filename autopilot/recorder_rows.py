@@ -32,12 +32,12 @@ class Row:
     (w, x, y, z); setpoint position m and velocity m/s (NaN: none); height m; mode index;
     predicted ground effect N; commanded rotor speeds rad/s; true ground effect N (NaN: not
     received this step); actual rotor speeds rpm (NaN: not received); desired roll, pitch rad
-    (NaN: no control output)."""
+    (NaN: no control output); body rates rad/s; acceleration m/s^2 (world, gravity removed)."""
 
-    T, P, V, Q, SP, SPV, H, MODE, GE, N, TRUE, ACT, DES = (
-        0, 1, 4, 7, 11, 14, 17, 18, 19, 22, 26, 29, 33,
+    T, P, V, Q, SP, SPV, H, MODE, GE, N, TRUE, ACT, DES, RATES, ACC = (
+        0, 1, 4, 7, 11, 14, 17, 18, 19, 22, 26, 29, 33, 35, 38,
     )  # fmt: skip
-    WIDTH = 35
+    WIDTH = 41
 
 
 SCENE_PERIOD_S = 0.02  # the 3-D scene at 50 Hz (the plots keep every step)
@@ -107,6 +107,9 @@ class RowSender:
             scalars_key("plots/errors/velocity"): spv - v,
             scalars_key("plots/errors/attitude"): attitude_error,
             scalars_key("plots/rotors/commanded"): a[:, r.N : r.N + 4],
+            scalars_key("plots/attitude"): q,
+            scalars_key("plots/rates"): a[:, r.RATES : r.RATES + 3],
+            scalars_key("plots/acceleration"): a[:, r.ACC : r.ACC + 3],
         }
         for i, axis in enumerate("xyz"):
             values[scalars_key(f"plots/ground_effect/{axis}/predicted")] = ge[:, i]

@@ -62,6 +62,11 @@ SERIES: dict[str, tuple[str, ...]] = {
     "plots/errors/velocity": ("vx", "vy", "vz"),  # m/s, setpoint - velocity
     "plots/errors/attitude": ("roll", "pitch"),  # rad, desired - actual
     "plots/mode": ("mode",),  # index into meta["modes"]
+    # for the gap diagnosis (learner/gap): the state's attitude and body rates, and the
+    # accelerometer-derived acceleration of the control period ending at the step
+    "plots/attitude": ("qw", "qx", "qy", "qz"),  # body FLU to world ENU
+    "plots/rates": ("p", "q", "r"),  # rad/s, body FLU
+    "plots/acceleration": ("ax", "ay", "az"),  # m/s^2, world, gravity removed
     "plots/learner/loss": ("loss",),  # online learner's loss (standardised units)
     "plots/learner/version": ("version",),  # weight-snapshot version the controller uses
 }

@@ -69,6 +69,8 @@ class AutopilotConfig:
     record_hz: float = 0.0  # > 0: record learning samples at this rate (thesis: 100 Hz)
     stop_after_samples: int | None = None  # end the flight once this many are recorded
     on_sample: Callable[[int], None] | None = None  # told the count of recorded samples
+    # told each airborne step (t, messages, state, rotor speeds applied over the last period)
+    on_step: Callable[[float, Step, FlightState, Quad], None] | None = None
     online: OnlineOptions = OnlineOptions()  # online learning (GFX_OL_METHOD turns it on)
     record: RecordOptions | None = None  # the flight's rerun recording; None: off
 
@@ -292,6 +294,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             )
             cmd_state = cmd.state
             airborne = height > resting_height + AIRBORNE_MARGIN_M
+            if config.on_step is not None and airborne and cmd_state.phase in RECORDED_PHASES:
+                config.on_step(t, step, state, speeds)
             sample_hz = config.record_hz or online.sample_hz
             if (
                 sample_hz > 0.0

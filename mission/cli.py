@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from learner.online.names import METHODS
-from mission import commands
+from mission import commands, gap_cli
 from mission.experiments.cli import add_experiment_parser
 from mission.mission_cli import add_mission_parser
 from mission.online_cli import add_online_learn_parsers, add_online_options
@@ -28,6 +28,16 @@ def _speedup(text: str) -> float | None:
         raise argparse.ArgumentTypeError(f"expected a number > 0 or 'max', got {text!r}") from None
     if not (math.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"expected a number > 0 or 'max', got {text!r}")
+    return value
+
+
+def _max_flight_s(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 1.0 <= value <= 86400.0:
+        raise argparse.ArgumentTypeError(f"expected seconds in [1, 86400], got {text!r}")
     return value
 
 
@@ -195,6 +205,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--origin", metavar="LAT,LON,ALT", help="geodetic origin of the local frame")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
+    p.add_argument("--flight-log", type=Path, help="save airborne steps as a gap-diagnosis log")
+    p.add_argument(
+        "--max-flight-s", type=_max_flight_s, default=900.0,
+        help="end the flight (exit code 3) after this many simulated seconds (default 900)",
+    )  # fmt: skip
     add_online_options(p)
     add_record_options(p, world=True)
     p.set_defaults(func=commands.cmd_autopilot)
@@ -295,6 +310,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--vehicle", default="nano")
     g.add_argument("--out", type=Path, default=DEFAULT_LOGS / "ground_effect.png")
     g.set_defaults(func=commands.cmd_plot)
+
+    gap_cli.add_parser(sub)
 
     p = sub.add_parser("demo", help="the demo flight (analytic, neural and no model)")
     p.add_argument("--world", help="world YAML or packaged name (default: rho2; --lift: default)")

@@ -6,6 +6,7 @@ import argparse
 import json
 import signal
 import sys
+from typing import Any
 
 from autopilot.params import MODEL_NAMES
 from simbridge.config import ConfigError
@@ -87,6 +88,15 @@ def _param_overrides(args: argparse.Namespace) -> dict[str, float]:
     return out | online_overrides(args)
 
 
+def _flight_log_writer(args: argparse.Namespace) -> Any:
+    if args.flight_log is None:
+        return None
+    from autopilot.flight_log import FlightLogWriter
+
+    mission = str(args.mission.resolve()) if args.mission else None
+    return FlightLogWriter(args.flight_log, {"mission": mission, "vehicle": args.vehicle})
+
+
 def cmd_autopilot(args: argparse.Namespace) -> int:
     import dataclasses
 
@@ -141,6 +151,8 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
         gcs_urls=gcs_urls,
         signing=Signing(args.signing_key_file) if args.signing_key_file else None,
         should_stop=lambda: bool(stop),
+        on_step=_flight_log_writer(args),
+        max_flight_s=args.max_flight_s,
         online=online_options(args, reproducible=args.auto_start),
     )
 
@@ -170,6 +182,8 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
     if args.trajectory:
         args.trajectory.parent.mkdir(parents=True, exist_ok=True)
         np.savez(args.trajectory, log=flight.log, columns=np.array(COLUMNS))
+    if config.on_step is not None:
+        config.on_step.write()
     summary = dict(
         flight.summary, rho=params.model()[1], recording=str(recording) if recording else None
     )

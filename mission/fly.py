@@ -61,7 +61,9 @@ def fly(
     via_gcs: bool = True,
     identity: str = "px4",
     say: Callable[[str], None] = lambda text: None,
+    flight_log: Path | None = None,
     record: bool | Path = True,
+    max_flight_s: float | None = None,
     autopilot_options: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line.
@@ -82,6 +84,10 @@ def fly(
         options += ["--trajectory", str(trajectory)]
     if network is not None:
         options += ["--network", str(network)]
+    if flight_log is not None:
+        options += ["--flight-log", str(flight_log)]
+    if max_flight_s is not None:
+        options += ["--max-flight-s", str(max_flight_s)]
     if record is False:
         options += ["--no-record"]
     else:

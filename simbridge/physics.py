@@ -154,8 +154,10 @@ class Simulation:
         x, y = start.xy_m
         z = start.altitude_m
         if z is None:  # rest on whatever surface is below the start point
+            ceiling = self.world.ceiling_height_m
+            top = 1000.0 if ceiling is None else ceiling - 1e-3  # under a ceiling, not on it
             hit = pb.rayTest(
-                [x, y, 1000.0], [x, y, -1.0], collisionFilterMask=WORLD_GROUP, physicsClientId=cid
+                [x, y, top], [x, y, -1.0], collisionFilterMask=WORLD_GROUP, physicsClientId=cid
             )[0]
             z = (hit[3][2] if hit[0] >= 0 else 0.0) + half[2]
         self.start_quaternion = quat_from_euler(

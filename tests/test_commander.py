@@ -100,3 +100,24 @@ def test_mode_numbers_round_trip_under_both_identities(mode):
         assert decode_mode("ardupilot", custom_mode(mode, "ardupilot")) == mode
     assert custom_mode(FlightMode.MISSION, "px4") == 0x04040000
     assert custom_mode(FlightMode.RETURN, "ardupilot") == 6
+
+
+def test_a_waypoint_never_reached_is_held_anyway_after_its_timeout():
+    """A vehicle floating above a low waypoint (a ground effect stronger than the model's):
+    the setpoint is the target exactly, so the timeout runs and the mission goes on."""
+    params = CommanderParams(spin_up_s=0.2, waypoint_timeout_s=3.0)
+    plan = (
+        PlanStep(0, "takeoff", altitude_m=0.3),
+        PlanStep(1, "waypoint", (-0.0171, 0.1331, 0.04)),
+        PlanStep(2, "land", (-0.0171, 0.1331, 0.0)),
+    )
+    s = requests.load_plan(CommanderState(), plan)
+    s, _ = requests.arm(s, 0.0, (0.0, 0.0, REST), None, False)
+    s, _ = requests.set_mode(s, FlightMode.MISSION, 0.0, (0.0, 0.0, REST), params)
+    c = command(s, params, 0.3, (0.0, 0.0, REST), REST, REST)
+    c = command(c.state, params, 2.0, (0.0, 0.0, 0.3), 0.3, REST)  # took off
+    t, stuck = 2.0, (-0.0173, 0.1337, 0.109)  # 7 cm above it, never within 2 cm
+    while t < 6.0 and c.state.phase != Phase.LANDING:
+        t += 0.004
+        c = command(c.state, params, t, stuck, stuck[2], REST)
+    assert c.state.phase == Phase.LANDING and t == pytest.approx(5.0, abs=0.1)

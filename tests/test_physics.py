@@ -133,6 +133,9 @@ def test_without_rotors_it_rests_on_the_ground_and_on_a_box():
         for _ in range(100):
             sim.step((0.0,) * 4)
         assert sim.state().position_m[2] == pytest.approx(0.1126, abs=2e-4)
+    low_ceiling = dataclasses.replace(load_world("default"), ceiling_height_m=0.85)
+    with Simulation(low_ceiling, VEHICLE, held=True) as sim:  # under it, not on top of it
+        assert sim.state().position_m[2] == pytest.approx(0.0126, abs=1e-9)
 
 
 def test_motor_lag_delays_the_actual_rotor_speeds():

@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from simbridge.config import param
 
 
@@ -44,6 +46,15 @@ def thrust_gain(height_m: float, rho: float, rotor_radius_m: float, cutoff_m: fl
     z = height_m if height_m > cutoff_m else cutoff_m
     r = rotor_radius_m / (4.0 * z)
     return 1.0 / (1.0 - rho * r * r) - 1.0
+
+
+def thrust_gain_array(
+    height_m: np.ndarray, rho: float, rotor_radius_m: float, cutoff_m: float
+) -> np.ndarray:
+    """`thrust_gain` over arrays of heights (the gap diagnosis evaluates it on whole logs)."""
+    h = np.asarray(height_m, dtype=float)
+    r = rotor_radius_m / (4.0 * np.maximum(np.where(np.isinf(h), 1e9, h), cutoff_m))
+    return np.where(np.isinf(h), 0.0, 1.0 / (1.0 - rho * r * r) - 1.0)
 
 
 def ground_effect_force_n(

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from simbridge.config import param
 
 # World directions probed for walls: +x, -x, +y, -y.
@@ -43,3 +45,17 @@ def wall_force_n(
         fx += magnitude * ux
         fy += magnitude * uy
     return (fx, fy, 0.0)
+
+
+def wall_force_array(
+    params: WallEffectParams,
+    total_thrust_n: np.ndarray,
+    rotor_radius_m: float,
+    wall_distances_m: np.ndarray,
+) -> np.ndarray:
+    """`wall_force_n` over a log: thrust (N,), distances (N, 4) -> world forces (N, 3)."""
+    d = np.asarray(wall_distances_m, dtype=float)
+    near = d <= params.range_m
+    r = rotor_radius_m / (4.0 * np.maximum(np.where(near, d, 1.0), params.min_distance_m))
+    magnitude = np.where(near, params.gain * r * r, 0.0) * np.asarray(total_thrust_n)[:, None]
+    return magnitude @ np.asarray(WALL_DIRECTIONS)

@@ -1,0 +1,199 @@
+"""The effect catalogue as fit candidates: each effect's physical parameters (units, bounds, a
+typical magnitude) and one force model of the whole world, built on simbridge/effects' formulas.
+
+`world_force(values, data, vehicle)` is the force, besides gravity, that a world whose effects
+have parameters `values` (name -> array, or absent) puts on the logged flight: rotor thrust
+(with motor lag and thrust-coefficient scale), ground, ceiling and wall effects, rotor and body
+drag on the air-relative velocity, and the measurement terms an accelerometer bias or delay add.
+Mass and thrust-coefficient errors scale the residual identically (m a = s T + ... and
+k m a = T + ...), so they are one candidate, `thrust_mass`, with c = s / k - 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import lfilter
+
+from learner.gap.flightdata import FlightData
+from simbridge.effects import EffectSet
+from simbridge.effects.drag import BodyDragParams, RotorDragParams, body_drag_n, rotor_drag_n
+from simbridge.effects.ground import (
+    CeilingEffectParams,
+    GroundEffectParams,
+    thrust_gain_array,
+)
+from simbridge.effects.proximity import WallEffectParams, wall_force_array
+from simbridge.vehicle import Vehicle
+
+
+@dataclass(frozen=True)
+class Candidate:
+    name: str
+    params: tuple[str, ...]
+    units: tuple[str, ...]
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
+    typical: tuple[float, ...]  # a magnitude worth finding: the excitation test's probe
+    effects: tuple[str, ...]  # catalogue effects it stands for
+
+
+CANDIDATES: dict[str, Candidate] = {
+    c.name: c
+    for c in (
+        Candidate("ground_effect", ("rho",), ("1",), (0.01,), (10.0,), (1.0,), ("ground_effect",)),
+        Candidate(
+            "ceiling_effect", ("rho",), ("1",), (0.01,), (10.0,), (1.0,), ("ceiling_effect",)
+        ),
+        Candidate("wall_effect", ("gain",), ("1",), (-10.0,), (10.0,), (0.5,), ("wall_effect",)),
+        Candidate(
+            "rotor_drag",
+            ("kx", "ky", "kz"),
+            ("N/((rad/s)(m/s))",) * 3,
+            (0.0,) * 3,
+            (1e-3,) * 3,
+            (2.2e-5, 2.2e-5, 1.0e-5),
+            ("rotor_drag",),
+        ),
+        Candidate(
+            "body_drag", ("drag_coefficient",), ("1",), (0.0,), (5.0,), (1.0,), ("body_drag",)
+        ),
+        Candidate(
+            "wind", ("wx", "wy", "wz"), ("m/s",) * 3, (-10.0,) * 3, (10.0,) * 3, (0.5,) * 3,
+            ("wind",),
+        ),
+        Candidate("motor_lag", ("tau",), ("s",), (0.002,), (0.3,), (0.02,), ("motor_lag",)),
+        Candidate(
+            "thrust_mass", ("c",), ("1",), (-0.5,), (1.0,), (0.05,),
+            ("thrust_coefficient", "mass_error"),
+        ),
+        Candidate(
+            "sensor_bias", ("bx", "by", "bz"), ("m/s^2",) * 3, (-5.0,) * 3, (5.0,) * 3, (0.1,) * 3,
+            ("sensor_bias",),
+        ),
+        Candidate(
+            "sensor_latency", ("imu_delay",), ("s",), (0.0,), (0.1,), (0.008,), ("sensor_latency",)
+        ),
+    )
+}  # fmt: skip
+Values = dict[str, np.ndarray]
+
+
+def nominal_values(effects: EffectSet) -> Values:
+    """The nominal world's effects as candidate values (absent effects are left out)."""
+    out: Values = {}
+    if effects.ground_effect:
+        out["ground_effect"] = np.array([effects.ground_effect.rho])
+    if effects.ceiling_effect:
+        out["ceiling_effect"] = np.array([effects.ceiling_effect.rho])
+    if effects.wall_effect:
+        out["wall_effect"] = np.array([effects.wall_effect.gain])
+    if effects.rotor_drag:
+        out["rotor_drag"] = np.array(effects.rotor_drag.coefficient_n_s_m)
+    if effects.body_drag:
+        out["body_drag"] = np.array([effects.body_drag.drag_coefficient])
+    if effects.wind:
+        out["wind"] = np.array(effects.wind.mean_m_s)
+    if effects.motor_lag:
+        out["motor_lag"] = np.array([effects.motor_lag.time_constant_s])
+    s = effects.thrust_coefficient.scale if effects.thrust_coefficient else 1.0
+    k = effects.mass_error.scale if effects.mass_error else 1.0
+    if s != 1.0 or k != 1.0:
+        out["thrust_mass"] = np.array([s / k - 1.0])
+    if effects.sensor_bias:
+        out["sensor_bias"] = np.array(effects.sensor_bias.accel_bias_m_s2)
+    if effects.sensor_latency:
+        out["sensor_latency"] = np.array([effects.sensor_latency.imu_delay_s])
+    return out
+
+
+def rotor_forces_n(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
+    """(N, 4) mean rotor thrusts over each period, through motor lag and the C_T scale."""
+    n = d.commands_rad_s
+    c_t = vehicle.thrust_coefficient_n_s2
+    if "thrust_mass" in values:
+        c_t = c_t * (1.0 + values["thrust_mass"][0])
+    if "motor_lag" not in values:
+        return c_t * n * n
+    # exact first-order lag of commands held over each period, at the physics step
+    sub = d.substeps
+    a = np.exp(-(d.dt_s / sub) / values["motor_lag"][0])
+    u = np.repeat(n, sub, axis=0)
+    y = lfilter([1.0 - a], [1.0, -a], u, axis=0, zi=(a * n[:1]))[0]
+    return c_t * (y * y).reshape(len(n), sub, 4).mean(axis=1)
+
+
+def world_force(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
+    """(N, 3) world-frame force besides gravity that makes m a of the log (see module doc)."""
+    f = rotor_forces_n(values, d, vehicle)
+    radius = vehicle.rotor_radius_m
+    ez = d.rotation[:, :, 2]  # body z in the world
+    if "ceiling_effect" in values:
+        p = CeilingEffectParams(rho=float(values["ceiling_effect"][0]))
+        f = f * (1.0 + thrust_gain_array(d.rotor_ceilings_m, p.rho, radius, p.cutoff_for(radius)))
+    thrust = f.sum(axis=1)
+    force = ez * thrust[:, None]
+    if "ground_effect" in values:
+        p = GroundEffectParams(rho=float(values["ground_effect"][0]))
+        gain = thrust_gain_array(d.rotor_heights_m, p.rho, radius, p.cutoff_for(radius))
+        force[:, 2] += (f * gain).sum(axis=1)
+    if "wall_effect" in values:
+        wall = WallEffectParams(gain=float(values["wall_effect"][0]))
+        force += wall_force_array(wall, thrust, radius, d.wall_distances_m)
+    force += _drag(values, d)
+    if "sensor_latency" in values:
+        # the accelerometer reports the body-frame specific force of `delay` ago; the log
+        # turns it into the world frame with the current attitude
+        delay = float(values["sensor_latency"][0])
+        body = np.einsum("nji,nj->ni", d.rotation, force)
+        t = d.time_s
+        late = np.column_stack([np.interp(t - delay, t, body[:, i]) for i in range(3)])
+        force = np.einsum("nij,nj->ni", d.rotation, late)
+    if "sensor_bias" in values:
+        force += vehicle.mass_kg * np.einsum("nij,j->ni", d.rotation, values["sensor_bias"])
+    return force
+
+
+def _drag(values: Values, d: FlightData) -> np.ndarray:
+    if "rotor_drag" not in values and "body_drag" not in values:
+        return np.zeros((len(d.time_s), 3))
+    wind = values.get("wind", np.zeros(3))
+    v_air = np.einsum("nji,nj->ni", d.rotation, d.velocity_m_s - wind)  # body frame
+    comps = (v_air[:, 0], v_air[:, 1], v_air[:, 2])
+    body = np.zeros_like(v_air)
+    if "rotor_drag" in values:
+        k = values["rotor_drag"]
+        params = RotorDragParams(coefficient_n_s_m=(float(k[0]), float(k[1]), float(k[2])))
+        body += np.column_stack(rotor_drag_n(params, d.commands_rad_s.sum(axis=1), comps))
+    if "body_drag" in values:
+        params = BodyDragParams(drag_coefficient=float(values["body_drag"][0]))
+        body += np.column_stack(body_drag_n(params, comps))
+    return np.einsum("nij,nj->ni", d.rotation, body)
+
+
+def to_world_effects(values: Values) -> list[dict]:
+    """Candidate values as world-YAML effect entries (thrust_mass as a C_T scale: the same
+    translational dynamics)."""
+    out: list[dict] = []
+    for name, v in values.items():
+        x = [float(a) for a in v]
+        if name in ("ground_effect", "ceiling_effect"):
+            out.append({"name": name, "rho": x[0]})
+        elif name == "wall_effect":
+            out.append({"name": name, "gain": x[0]})
+        elif name == "rotor_drag":
+            out.append({"name": name, "coefficient_n_s_m": x})
+        elif name == "body_drag":
+            out.append({"name": name, "drag_coefficient": x[0]})
+        elif name == "wind":
+            out.append({"name": name, "mean_m_s": x})
+        elif name == "motor_lag":
+            out.append({"name": name, "time_constant_s": x[0]})
+        elif name == "thrust_mass":
+            out.append({"name": "thrust_coefficient", "scale": 1.0 + x[0]})
+        elif name == "sensor_bias":
+            out.append({"name": name, "accel_bias_m_s2": x})
+        elif name == "sensor_latency":
+            out.append({"name": name, "imu_delay_s": x[0]})
+    return out

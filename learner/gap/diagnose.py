@@ -1,0 +1,258 @@
+"""The diagnosis of flight logs against a nominal world: residuals, regimes, candidate
+selection with identifiability, the corrected world's effects, and the gap on held-out
+flights before and after (force, rollouts; overall and per region)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from learner.gap import fit as gapfit
+from learner.gap.candidates import CANDIDATES, Values, nominal_values
+from learner.gap.flightdata import FlightData, prepare
+from learner.gap.logs import FlightLog
+from learner.gap.regimes import REGIMES, RegimeBin, regime_table, regime_variables, rules
+from learner.gap.residual import force_gap_ms, residual_n
+from learner.gap.rollout import HORIZON_S, rms, rollout_errors, shrink
+from learner.gap.stats import ess_ratio
+from learner.gap.torque import torque_gap
+from simbridge.vehicle import Vehicle
+from simbridge.world import World
+
+Z_CRIT = 1.959964
+
+
+@dataclass
+class Diagnosis:
+    fitting: list[str]
+    held_out: list[str]
+    noise_sd_n: float
+    ess_ratio: float
+    excitation: dict[str, float]
+    effects: dict[str, dict[str, Any]]  # catalogue effect -> status, parameters, group
+    chosen: Values
+    search: list[dict]
+    regimes: list[RegimeBin]
+    rules: list[str]
+    gap: dict[str, Any]
+    residuals: dict[str, np.ndarray] = field(default_factory=dict)  # flight -> (N, 3)
+    corrected_residuals: dict[str, np.ndarray] = field(default_factory=dict)
+    flights: dict[str, FlightData] = field(default_factory=dict)
+
+
+def _problem(flights: list[FlightData], nominal: Values, vehicle: Vehicle) -> gapfit.Problem:
+    res = [residual_n(d, nominal, vehicle) for d in flights]
+    problem = gapfit.Problem(flights, res, nominal, vehicle)
+    problem.noise_var = gapfit.noise_variance(res, flights)
+    return problem
+
+
+def effect_report(
+    problem: gapfit.Problem, best: gapfit.Fit, excitation: dict[str, float], excited: list[str]
+) -> dict[str, dict[str, Any]]:
+    """Each catalogue effect: present, absent or not identifiable (not excited, or
+    indistinguishable from another: the group is named), with parameters and 95% CIs."""
+    sens = {c: gapfit.sensitivities(problem, c, {**best.values}) for c in excited}
+    out: dict[str, dict[str, Any]] = {}
+    for name, cand in CANDIDATES.items():
+        entry: dict[str, Any] = {"candidate": name, "excitation_z": excitation[name]}
+        if name in best.values:
+            group = sorted(
+                other
+                for other in excited
+                if other != name
+                and max(
+                    gapfit.collinearity_r2(sens[name], sens[other]),
+                    gapfit.collinearity_r2(sens[other], sens[name]),
+                )
+                >= gapfit.COLLINEAR_R2
+            )
+            v, se = best.values[name], best.stderr[name]
+            entry["parameters"] = {
+                p: {
+                    "value": float(v[i]),
+                    "ci95": [float(v[i] - Z_CRIT * se[i]), float(v[i] + Z_CRIT * se[i])],
+                    "unit": cand.units[i],
+                }
+                for i, p in enumerate(cand.params)
+            }
+            if len(cand.effects) > 1 or group:
+                entry["status"] = "not identifiable"
+                members = sorted(
+                    {*cand.effects, *(e for g in group for e in CANDIDATES[g].effects)}
+                )
+                entry["group"] = members
+                entry["why"] = "indistinguishable in the data: " + ", ".join(members)
+            else:
+                entry["status"] = "present"
+        elif name not in excited:
+            entry["status"] = "not identifiable"
+            entry["why"] = f"not excited by the flights (z = {excitation[name]:.1f})"
+            entry["group"] = list(cand.effects)
+        else:
+            entry["status"] = "absent"
+        for effect in cand.effects:
+            e = dict(entry)
+            if name == "thrust_mass" and "parameters" in entry:
+                c = entry["parameters"]["c"]
+                e["parameters"] = _thrust_mass_as(effect, c)
+            out[effect] = e
+    return out
+
+
+def _thrust_mass_as(effect: str, c: dict[str, Any]) -> dict[str, Any]:
+    """c = s / k - 1 read as a C_T scale s (k = 1) or a mass scale k (s = 1)."""
+    lo, hi = c["ci95"]
+    if effect == "thrust_coefficient":
+        return {"scale": {"value": 1.0 + c["value"], "ci95": [1.0 + lo, 1.0 + hi], "unit": "1"}}
+    return {
+        "scale": {"value": 1.0 / (1.0 + c["value"]), "ci95": [1.0 / (1.0 + hi), 1.0 / (1.0 + lo)],
+                  "unit": "1"}
+    }  # fmt: skip
+
+
+def diagnose(
+    fitting: list[FlightLog],
+    held_out: list[FlightLog],
+    world: World,
+    vehicle: Vehicle,
+    folds: int = 3,
+) -> Diagnosis:
+    """The whole analysis; with no held-out logs the gap is measured by cross-validation."""
+    nominal = nominal_values(world.effects)
+    fit_data = [prepare(log, world, vehicle) for log in fitting]
+    hold_data = [prepare(log, world, vehicle) for log in held_out]
+    problem = _problem(fit_data, nominal, vehicle)
+    excitation = {c: gapfit.excitation_z(problem, c) for c in CANDIDATES}
+    excited = [c for c in CANDIDATES if excitation[c] >= gapfit.Z_EXCITE]
+    # the effective sample size of the residual once the excited effects are all fitted
+    everything = gapfit.fit(problem, tuple(c for c in excited if c != "wind"))
+    after = problem.predicted(everything.values)
+    problem.ess_ratio = ess_ratio(
+        [(r - p)[:: gapfit.STRIDE] for r, p in zip(problem.residuals, after, strict=True)]
+    )
+    best, trail = gapfit.forward_search(problem, excited, folds)
+    effects = effect_report(problem, best, excitation, excited)
+    all_data = fit_data + hold_data
+    all_res = problem.residuals + [residual_n(d, nominal, vehicle) for d in hold_data]
+    table = regime_table(all_data, all_res, vehicle)
+    if hold_data:
+        gap = held_out_gap(_problem(hold_data, nominal, vehicle), best.values)
+    else:
+        gap = cross_validated_gap(problem, best.names, folds)
+
+    return Diagnosis(
+        fitting=[d.name for d in fit_data],
+        held_out=[d.name for d in hold_data],
+        noise_sd_n=float(np.sqrt(problem.noise_var)),
+        ess_ratio=problem.ess_ratio,
+        excitation=excitation,
+        effects=effects,
+        chosen=best.values,
+        search=trail,
+        regimes=table,
+        rules=rules(table),
+        gap=gap,
+        residuals={d.name: r for d, r in zip(all_data, all_res, strict=True)},
+        corrected_residuals={
+            d.name: r - p
+            for d, r, p in zip(
+                all_data,
+                all_res,
+                _problem(all_data, nominal, vehicle).predicted(best.values),
+                strict=True,
+            )
+        },
+        flights={d.name: d for d in all_data},
+    )
+
+
+def held_out_gap(problem: gapfit.Problem, values: Values) -> dict[str, Any]:
+    """Force gap and rollout error before and after the correction, overall and per region."""
+    corrected = {**problem.nominal, **values}
+    after = [r - p for r, p in zip(problem.residuals, problem.predicted(values), strict=True)]
+    out: dict[str, Any] = {"flights": [d.name for d in problem.flights]}
+    before_f = _pooled_gap(problem.flights, problem.residuals, problem.noise_var)
+    after_f = _pooled_gap(problem.flights, after, problem.noise_var)
+    out["force_rms_n"] = {"before": before_f, "after": after_f, "shrink": shrink(before_f, after_f)}
+    rb = np.concatenate(
+        [rollout_errors(d, problem.nominal, problem.vehicle, HORIZON_S) for d in problem.flights]
+    )
+    ra = np.concatenate(
+        [rollout_errors(d, corrected, problem.vehicle, HORIZON_S) for d in problem.flights]
+    )
+    rb_rms, ra_rms = rms(rb), rms(ra)
+    out["rollout_rms_m"] = {
+        "horizon_s": HORIZON_S, "before": rb_rms, "after": ra_rms, "shrink": shrink(rb_rms, ra_rms)
+    }  # fmt: skip
+    out["one_step_force_rms_n"] = {
+        "before": rms(np.concatenate(problem.residuals).ravel()) * np.sqrt(3),
+        "after": rms(np.concatenate(after).ravel()) * np.sqrt(3),
+    }
+    out["torque_rms_n_m"] = torque_gap(problem.flights, problem.nominal, corrected, problem.vehicle)
+    out["regions"] = _per_region(problem, after)
+    return out
+
+
+def _pooled_gap(flights: list[FlightData], residuals: list[np.ndarray], noise_var: float) -> float:
+    """The systematic force gap (N) over flights: noise-corrected RMS of the smoothed residual."""
+    parts = [
+        force_gap_ms(r, d.segment, d.dt_s, noise_var) * len(r)
+        for d, r in zip(flights, residuals, strict=True)
+    ]
+    return float(np.sqrt(sum(parts) / sum(len(r) for r in residuals)))
+
+
+def _per_region(problem: gapfit.Problem, after: list[np.ndarray]) -> list[dict[str, Any]]:
+    """Force gap before and after within each regime bin that holds enough samples."""
+    from learner.gap.residual import SMOOTH_WINDOW_S, smooth_per_segment
+
+    rows = []
+    smooth_b, smooth_a, variables = [], [], []
+    for d, r, a in zip(problem.flights, problem.residuals, after, strict=True):
+        w = max(1, round(SMOOTH_WINDOW_S / d.dt_s))
+        smooth_b.append(smooth_per_segment(r, d.segment, w))
+        smooth_a.append(smooth_per_segment(a, d.segment, w))
+        variables.append(regime_variables(d, problem.vehicle))
+    sb, sa = np.concatenate(smooth_b), np.concatenate(smooth_a)
+    for name, (_, _, edges) in REGIMES.items():
+        v = np.concatenate([x[name] for x in variables])
+        k = np.digitize(v, edges) - 1
+        for b in range(len(edges) - 1):
+            sel = k == b
+            if sel.sum() < 50:
+                continue
+            floor = (
+                3.0 * problem.noise_var / max(1, round(SMOOTH_WINDOW_S / problem.flights[0].dt_s))
+            )
+            before = float(np.sqrt(max(np.mean(np.sum(sb[sel] ** 2, axis=1)) - floor, 0.0)))
+            after_ = float(np.sqrt(max(np.mean(np.sum(sa[sel] ** 2, axis=1)) - floor, 0.0)))
+            rows.append(
+                {"variable": name, "low": float(edges[b]), "high": float(edges[b + 1]),
+                 "samples": int(sel.sum()), "before_n": before, "after_n": after_,
+                 "shrink": shrink(before, after_)}
+            )  # fmt: skip
+    return rows
+
+
+def cross_validated_gap(
+    problem: gapfit.Problem, names: tuple[str, ...], folds: int
+) -> dict[str, Any]:
+    """With no held-out logs: each fold's flights scored with the model fitted on the others."""
+    k = min(folds, len(problem.flights))
+    before, after = [], []
+    for fold in range(max(k, 1)):
+        test = [i for i in range(len(problem.flights)) if k < 2 or i % k == fold]
+        train = [i for i in range(len(problem.flights)) if k >= 2 and i % k != fold] or test
+        fitted = gapfit.fit(problem.subset(train), names)
+        held = problem.subset(test)
+        g = held_out_gap(held, fitted.values)
+        before.append(g["force_rms_n"]["before"])
+        after.append(g["force_rms_n"]["after"])
+    b, a = float(np.mean(before)), float(np.mean(after))
+    return {
+        "cross_validated": True,
+        "force_rms_n": {"before": b, "after": a, "shrink": shrink(b, a)},
+    }

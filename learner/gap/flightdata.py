@@ -1,0 +1,165 @@
+"""One log prepared for the force model: mid-period attitude and velocity, acceleration,
+rotor commands and the distances to the nominal world's surfaces, as arrays."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from learner.gap.geometry import distance_above_m, height_below_m, wall_distances_m
+from learner.gap.logs import FlightLog
+from simbridge.effects.proximity import WallEffectParams
+from simbridge.vehicle import Vehicle
+from simbridge.world import World
+
+# Rows further apart than this many control periods start a new segment (airborne spells).
+GAP_PERIODS = 1.5
+SMOOTH_S = 0.1  # Savitzky-Golay window for acceleration from velocity
+
+
+@dataclass(frozen=True)
+class FlightData:
+    name: str
+    time_s: np.ndarray  # (N,)
+    dt_s: float  # control period (median row spacing)
+    segment: np.ndarray  # (N,) index of the airborne spell each row belongs to
+    position_m: np.ndarray  # (N, 3) at the row's time
+    velocity_m_s: np.ndarray  # (N, 3) mean over the period
+    velocity_at_m_s: np.ndarray  # (N, 3) at the row's time
+    rotation: np.ndarray  # (N, 3, 3) body to world, mid-period
+    rates_rad_s: np.ndarray  # (N, 3)
+    commands_rad_s: np.ndarray  # (N, 4) over the period
+    acceleration_m_s2: np.ndarray  # (N, 3) kinematic, world
+    measured_acceleration: bool  # False: differentiated from velocity
+    rotor_heights_m: np.ndarray  # (N, 4) down from each hub
+    rotor_ceilings_m: np.ndarray  # (N, 4) up from each hub
+    wall_distances_m: np.ndarray  # (N, 4) along +x, -x, +y, -y
+    height_m: np.ndarray  # (N,) centre of mass above the surface below (inf: none)
+    substeps: int  # physics steps per control period (motor lag)
+    meta: dict
+
+
+def quat_to_matrices(q: np.ndarray) -> np.ndarray:
+    """(N, 4) w, x, y, z -> (N, 3, 3) rotation matrices."""
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=1,
+    )
+
+
+def _previous(a: np.ndarray, new_segment: np.ndarray) -> np.ndarray:
+    """Each row's predecessor within its segment (itself at a segment's start)."""
+    prev = np.concatenate([a[:1], a[:-1]])
+    prev[new_segment] = a[new_segment]
+    return prev
+
+
+def differentiate(t: np.ndarray, v: np.ndarray, segment: np.ndarray, dt_s: float) -> np.ndarray:
+    """Acceleration from velocity: a Savitzky-Golay derivative per segment."""
+    out = np.zeros_like(v)
+    window = max(5, round(SMOOTH_S / dt_s) | 1)
+    for s in np.unique(segment):
+        idx = np.flatnonzero(segment == s)
+        if len(idx) >= window:
+            out[idx] = savgol_filter(v[idx], window, 2, deriv=1, delta=dt_s, axis=0)
+        elif len(idx) > 1:
+            out[idx] = np.gradient(v[idx], t[idx], axis=0)
+    return out
+
+
+def smooth_positions(p: np.ndarray, segment: np.ndarray, dt_s: float) -> np.ndarray:
+    """Positions through a quadratic Savitzky-Golay filter of SMOOTH_S per segment."""
+    out = p.copy()
+    window = max(5, round(SMOOTH_S / dt_s) | 1)
+    for s in np.unique(segment):
+        idx = np.flatnonzero(segment == s)
+        if len(idx) >= window:
+            out[idx] = savgol_filter(p[idx], window, 2, axis=0)
+    return out
+
+
+CONTACT_MARGIN_M = 0.005  # closer than this to a wall or ceiling: touching it
+
+
+def touching(log: FlightLog, world: World, vehicle: Vehicle) -> np.ndarray:
+    """Rows where the body touches a wall or the ceiling: contact forces no aerodynamic
+    effect explains (a strong wall or ceiling effect pulls the vehicle into contact); the
+    ground is left out already by logging only airborne steps."""
+    half = np.asarray(vehicle.body_size_m) / 2.0
+    walls = wall_distances_m(log.position_m, world.obstacles, 1.0)
+    out = np.min(walls, axis=1) < max(half[0], half[1]) + CONTACT_MARGIN_M
+    if world.ceiling_height_m is not None:
+        out |= log.position_m[:, 2] + half[2] + CONTACT_MARGIN_M > world.ceiling_height_m
+    return out
+
+
+def without_rows(log: FlightLog, drop: np.ndarray) -> FlightLog:
+    keep = ~drop
+
+    def k(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else a[keep]
+
+    return dataclasses.replace(
+        log, time_s=log.time_s[keep], position_m=log.position_m[keep],
+        velocity_m_s=log.velocity_m_s[keep], quaternion=log.quaternion[keep],
+        body_rates_rad_s=log.body_rates_rad_s[keep],
+        rotor_speeds_rad_s=log.rotor_speeds_rad_s[keep],
+        acceleration_m_s2=k(log.acceleration_m_s2), battery_v=k(log.battery_v),
+    )  # fmt: skip
+
+
+def prepare(log: FlightLog, world: World, vehicle: Vehicle) -> FlightData:
+    contact = touching(log, world, vehicle)
+    if contact.any():  # the rows around them start new segments (time gaps)
+        log = without_rows(log, contact)
+    t = log.time_s
+    if len(t) < 10:
+        raise ValueError(f"{log.name}: only {len(t)} rows; a flight log needs at least 10")
+    dt = float(np.median(np.diff(t)))
+    new_segment = np.concatenate([[True], np.diff(t) > GAP_PERIODS * dt])
+    segment = np.cumsum(new_segment) - 1
+    q_prev = _previous(log.quaternion, new_segment)
+    # q and -q are one attitude: align before averaging
+    sign = np.sign(np.sum(q_prev * log.quaternion, axis=1))[:, None]
+    rotation = quat_to_matrices(q_prev * np.where(sign == 0, 1, sign) + log.quaternion)
+    v_mid = 0.5 * (_previous(log.velocity_m_s, new_segment) + log.velocity_m_s)
+    # distances to surfaces from a smoothed position: the ground effect is steep in height
+    # (1 / z^2), so white position noise near the ground biases it (errors in variables)
+    smooth_p = smooth_positions(log.position_m, segment, dt)
+    p_mid = 0.5 * (_previous(smooth_p, new_segment) + smooth_p)
+    measured = log.acceleration_m_s2 is not None
+    acc = log.acceleration_m_s2 if measured else differentiate(t, log.velocity_m_s, segment, dt)
+    hubs = p_mid[:, None, :] + np.einsum("nij,kj->nki", rotation, vehicle.rotor_positions_body_m())
+    flat = hubs.reshape(-1, 3)
+    fx = world.effects
+    down = fx.ground_effect.ray_length_m if fx.ground_effect else 3.0
+    up = fx.ceiling_effect.ray_length_m if fx.ceiling_effect else 3.0
+    wall = fx.wall_effect or WallEffectParams()
+    return FlightData(
+        name=log.name,
+        time_s=t,
+        dt_s=dt,
+        segment=segment,
+        position_m=log.position_m,
+        velocity_m_s=v_mid,
+        velocity_at_m_s=log.velocity_m_s,
+        rotation=rotation,
+        rates_rad_s=log.body_rates_rad_s,
+        commands_rad_s=log.rotor_speeds_rad_s,
+        acceleration_m_s2=acc,
+        measured_acceleration=measured,
+        rotor_heights_m=height_below_m(flat, world.obstacles, down).reshape(-1, 4),
+        rotor_ceilings_m=distance_above_m(flat, world.ceiling_height_m, up).reshape(-1, 4),
+        wall_distances_m=wall_distances_m(p_mid, world.obstacles, wall.range_m),
+        height_m=height_below_m(p_mid, world.obstacles, down),
+        substeps=max(1, round(dt * world.physics_rate_hz)),
+        meta=log.meta,
+    )

@@ -1,0 +1,224 @@
+"""The diagnosis's outputs: the corrected world file, a JSON of every figure, a Markdown
+report with PNG plots, and a rerun recording of the residuals over the flights."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from learner.gap.candidates import to_world_effects
+from learner.gap.diagnose import Diagnosis
+from learner.gap.regimes import describe_range
+
+
+def corrected_world_yaml(nominal_yaml: str, diagnosis: Diagnosis) -> str:
+    """The nominal world with the chosen effects (fitted parameters) added or replaced."""
+    data = yaml.safe_load(nominal_yaml)
+    chosen = to_world_effects(diagnosis.chosen)
+    names = {e["name"] for e in chosen}
+    kept = [e for e in data.get("effects") or [] if e.get("name") not in names]
+    data["effects"] = kept + chosen
+    header = "# Corrected by `groundfx gap diagnose`: the nominal world plus the effects found.\n"
+    return header + yaml.safe_dump(data, sort_keys=False)
+
+
+def figures(diagnosis: Diagnosis, closed_loop: dict[str, Any] | None) -> dict[str, Any]:
+    return {
+        "fitting_flights": diagnosis.fitting,
+        "held_out_flights": diagnosis.held_out,
+        "noise_sd_n": diagnosis.noise_sd_n,
+        "ess_ratio": diagnosis.ess_ratio,
+        "excitation_z": diagnosis.excitation,
+        "effects": diagnosis.effects,
+        "chosen": {k: [float(x) for x in v] for k, v in diagnosis.chosen.items()},
+        "search": diagnosis.search,
+        "regimes": [dict(b.__dict__, significant=b.significant) for b in diagnosis.regimes],
+        "rules": diagnosis.rules,
+        "gap": diagnosis.gap,
+        "closed_loop": closed_loop,
+    }
+
+
+def write_outputs(
+    diagnosis: Diagnosis,
+    out: Path,
+    nominal_world: Path,
+    closed_loop: dict[str, Any] | None = None,
+    recording: bool = True,
+) -> dict[str, Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {
+        "world": out / "corrected_world.yaml",
+        "json": out / "gap.json",
+        "report": out / "report.md",
+    }
+    paths["world"].write_text(corrected_world_yaml(nominal_world.read_text(), diagnosis))
+    data = figures(diagnosis, closed_loop)
+    paths["json"].write_text(json.dumps(data, indent=1, default=_plain))
+    paths.update(_plots(diagnosis, out))
+    if recording:
+        paths["recording"] = _recording(diagnosis, out / "residuals.rrd")
+    paths["report"].write_text(_markdown(diagnosis, closed_loop, nominal_world, paths))
+    return paths
+
+
+def _plain(x: Any) -> Any:
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"not JSON: {type(x)}")
+
+
+def _plots(diagnosis: Diagnosis, out: Path) -> dict[str, Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    paths = {}
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for name, d in diagnosis.flights.items():
+        r = diagnosis.residuals[name]
+        c = diagnosis.corrected_residuals[name]
+        h = np.where(np.isfinite(d.height_m), d.height_m, np.nan)
+        axes[0].plot(h[::5], r[::5, 2] * 1000, ".", ms=1, alpha=0.4, color="tab:red")
+        axes[0].plot(h[::5], c[::5, 2] * 1000, ".", ms=1, alpha=0.4, color="tab:blue")
+        speed = np.linalg.norm(d.velocity_m_s[:, :2], axis=1)
+        along = np.sum(r[:, :2] * d.velocity_m_s[:, :2], axis=1) / np.maximum(speed, 1e-6)
+        along_c = np.sum(c[:, :2] * d.velocity_m_s[:, :2], axis=1) / np.maximum(speed, 1e-6)
+        axes[1].plot(speed[::5], along[::5] * 1000, ".", ms=1, alpha=0.4, color="tab:red")
+        axes[1].plot(speed[::5], along_c[::5] * 1000, ".", ms=1, alpha=0.4, color="tab:blue")
+    axes[0].set(
+        xscale="log", xlabel="height above the surface (m)", ylabel="vertical residual (mN)"
+    )
+    axes[1].set(xlabel="horizontal speed (m/s)", ylabel="residual along the velocity (mN)")
+    axes[0].set_title("red: nominal world, blue: corrected")
+    fig.tight_layout()
+    paths["plot_residuals"] = out / "residuals.png"
+    fig.savefig(paths["plot_residuals"], dpi=110)
+    plt.close(fig)
+
+    sig = [b for b in diagnosis.regimes if b.significant][:20]
+    if sig:
+        fig, ax = plt.subplots(figsize=(9, 0.3 * len(sig) + 1.5))
+        labels = [f"{describe_range(b.variable, b.low, b.high)} ({b.component[:4]})" for b in sig]
+        means = np.array([b.mean for b in sig]) * 100
+        err = np.array([[b.mean - b.ci_low, b.ci_high - b.mean] for b in sig]).T * 100
+        ax.barh(range(len(sig)), means, xerr=err, color="tab:orange")
+        ax.set_yticks(range(len(sig)), labels, fontsize=7)
+        ax.set_xlabel("mean residual, % of the weight (95% flight-bootstrap CI)")
+        fig.tight_layout()
+        paths["plot_regimes"] = out / "regimes.png"
+        fig.savefig(paths["plot_regimes"], dpi=110)
+        plt.close(fig)
+    return paths
+
+
+def _recording(diagnosis: Diagnosis, path: Path) -> Path:
+    """Residuals before and after the correction per flight, on the `sim_time` timeline."""
+    import rerun as rr
+
+    rec = rr.RecordingStream("groundfx_gap")
+    rec.save(path)
+    for name, d in diagnosis.flights.items():
+        t = rr.TimeColumn("sim_time", duration=d.time_s)
+        for label, r in (("nominal", diagnosis.residuals[name]), ("corrected",
+                         diagnosis.corrected_residuals[name])):  # fmt: skip
+            rec.send_columns(
+                f"gap/{name}/residual_{label}_n",
+                indexes=[t],
+                columns=rr.Scalars.columns(scalars=r),
+            )
+        rec.send_columns(
+            f"gap/{name}/position_m",
+            indexes=[t],
+            columns=rr.Points3D.columns(positions=d.position_m),
+        )
+    rec.flush()
+    rr.disconnect(recording=rec)
+    return path
+
+
+def _markdown(
+    diagnosis: Diagnosis,
+    closed_loop: dict[str, Any] | None,
+    world: Path,
+    paths: dict[str, Path],
+) -> str:
+    lines = [
+        "# Sim-to-real gap diagnosis",
+        "",
+        f"Nominal world `{world}`; fitting flights {', '.join(diagnosis.fitting)}; "
+        f"held out {', '.join(diagnosis.held_out) or 'none (cross-validated)'}. Residual "
+        f"noise {diagnosis.noise_sd_n * 1000:.2f} mN per component; effective samples "
+        f"{diagnosis.ess_ratio:.2f} per sample.",
+        "",
+        "## Where",
+        "",
+    ]
+    lines += [f"- {r}" for r in diagnosis.rules] or ["- no regime with a significant residual"]
+    if "plot_regimes" in paths:
+        lines += ["", "![regimes](regimes.png)"]
+    lines += [
+        "",
+        "## Which",
+        "",
+        "| effect | status | parameters (95% CI) | note |",
+        "|---|---|---|---|",
+    ]
+    for effect, e in diagnosis.effects.items():
+        params = "; ".join(
+            f"{p} {v['value']:.4g} ({v['ci95'][0]:.4g} to {v['ci95'][1]:.4g}) {v['unit']}"
+            for p, v in (e.get("parameters") or {}).items()
+        )
+        lines.append(f"| {effect} | {e['status']} | {params} | {e.get('why', '')} |")
+    g = diagnosis.gap
+    lines += ["", "## How far", ""]
+    f = g["force_rms_n"]
+    lines.append(
+        f"- force gap (systematic RMS, noise removed): {f['before'] * 1000:.2f} mN -> "
+        f"{f['after'] * 1000:.2f} mN, shrink {f['shrink'] * 100:.0f}%"
+    )
+    if "torque_rms_n_m" in g:
+        q = g["torque_rms_n_m"]
+        lines.append(
+            f"- torque gap (body frame, RMS of 0.1 s means; holds the rate noise's floor): "
+            f"{q['before'] * 1e6:.2f} uN m -> {q['after'] * 1e6:.2f} uN m, "
+            f"shrink {q['shrink'] * 100:.0f}%"
+        )
+    if "rollout_rms_m" in g:
+        r = g["rollout_rms_m"]
+        lines.append(
+            f"- open-loop rollout error at {r['horizon_s']:g} s: {r['before'] * 1000:.1f} mm -> "
+            f"{r['after'] * 1000:.1f} mm, shrink {r['shrink'] * 100:.0f}% (includes the noise "
+            "of the logged start states)"
+        )
+    if closed_loop:
+        lines.append(
+            f"- closed-loop tracking difference to the logged flights: "
+            f"{closed_loop['before_m'] * 1000:.1f} mm -> {closed_loop['after_m'] * 1000:.1f} mm, "
+            f"shrink {closed_loop['shrink'] * 100:.0f}%"
+        )
+    regions = g.get("regions") or []
+    if regions:
+        lines += [
+            "",
+            "| region | samples | before (mN) | after (mN) | shrink |",
+            "|---|---|---|---|---|",
+        ]
+        for r in regions:
+            if r["before_n"] < 1e-3:
+                continue
+            lines.append(
+                f"| {describe_range(r['variable'], r['low'], r['high'])} | {r['samples']} | "
+                f"{r['before_n'] * 1000:.2f} | {r['after_n'] * 1000:.2f} | "
+                f"{r['shrink'] * 100:.0f}% |"
+            )
+    lines += ["", "![residuals](residuals.png)", "", "Outputs: " + ", ".join(
+        f"`{p.name}`" for p in paths.values())]  # fmt: skip
+    return "\n".join(lines) + "\n"

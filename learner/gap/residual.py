@@ -1,0 +1,49 @@
+"""The residual: per sample, the force the nominal model does not explain,
+r = m a - m g - (R f_rotors + the nominal world's modelled effects), g pointing down."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from learner.gap.candidates import Values, world_force
+from learner.gap.flightdata import FlightData
+from simbridge.vehicle import GRAVITY_M_S2, Vehicle
+
+SMOOTH_WINDOW_S = 0.1  # the "force gap" averages white sensor noise over this window
+
+
+def residual_n(d: FlightData, nominal: Values, vehicle: Vehicle) -> np.ndarray:
+    """(N, 3) world-frame residual force of one flight against the nominal world."""
+    m = vehicle.mass_kg
+    ma = m * d.acceleration_m_s2
+    ma[:, 2] += m * GRAVITY_M_S2
+    return ma - world_force(nominal, d, vehicle)
+
+
+def smooth_per_segment(x: np.ndarray, segment: np.ndarray, window: int) -> np.ndarray:
+    """A centred moving average within each segment (edges average what they have)."""
+    out = np.empty_like(x, dtype=float)
+    kernel = np.ones(window)
+    for s in np.unique(segment):
+        idx = np.flatnonzero(segment == s)
+        part = x[idx].reshape(len(idx), -1)
+        counts = np.convolve(np.ones(len(idx)), kernel, mode="same")
+        out[idx] = np.column_stack(
+            [np.convolve(part[:, j], kernel, mode="same") / counts for j in range(part.shape[1])]
+        ).reshape(x[idx].shape)
+    return out
+
+
+def force_gap_ms(
+    residual: np.ndarray, segment: np.ndarray, dt_s: float, noise_var: float = 0.0
+) -> float:
+    """Mean square of the residual's systematic part (N^2): the residual averaged over
+    SMOOTH_WINDOW_S per segment, less what white noise of per-component variance
+    `noise_var` leaves in such an average."""
+    window = max(1, round(SMOOTH_WINDOW_S / dt_s))
+    smooth = smooth_per_segment(residual, segment, window)
+    return max(float(np.mean(np.sum(smooth**2, axis=1))) - 3.0 * noise_var / window, 0.0)
+
+
+def force_gap_rms(residual: np.ndarray, segment: np.ndarray, dt_s: float) -> float:
+    return float(np.sqrt(force_gap_ms(residual, segment, dt_s)))

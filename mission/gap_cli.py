@@ -1,0 +1,129 @@
+"""`groundfx gap diagnose|bench`: the sim-to-real gap diagnosis on flight logs, and its blind
+check on "real" flights flown in worlds holding effects the diagnosis is not told."""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from simbridge.config import ConfigError
+
+
+def add_parser(sub: Any) -> None:
+    g = sub.add_parser("gap", help="sim-to-real gap diagnosis").add_subparsers(
+        dest="gap_command", required=True
+    )
+    d = g.add_parser("diagnose", help="residuals, effects and a corrected world from flight logs")
+    d.add_argument("logs", type=Path, nargs="+", help="flight logs (.csv, .parquet, .rrd)")
+    d.add_argument("--world", required=True, help="the nominal world (YAML or packaged name)")
+    d.add_argument("--holdout", type=Path, nargs="+", default=[], help="logs to score only")
+    d.add_argument("--folds", type=int, default=3, help="cross-validation folds over flights")
+    d.add_argument("--columns", type=Path, help="column mapping YAML for other vehicles' logs")
+    d.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
+    d.add_argument("--no-replay", action="store_true", help="skip the closed-loop re-flights")
+    d.add_argument("--out", type=Path, required=True, help="output folder")
+    d.set_defaults(func=cmd_diagnose)
+    b = g.add_parser("bench", help="the diagnosis, scored on flights with withheld effects")
+    b.add_argument("--out", type=Path, required=True, help="output folder (flights are cached)")
+    b.add_argument("--cases", help="comma-separated case names (default: all)")
+    b.add_argument(
+        "--replay", action="store_true",
+        help="also fly each held-out mission again in the nominal and corrected worlds",
+    )  # fmt: skip
+    b.add_argument("--json", action="store_true", help="print the scores as one JSON object")
+    b.set_defaults(func=cmd_bench)
+
+
+def run_diagnosis(
+    fitting: list[Path],
+    held_out: list[Path],
+    world: str,
+    out: Path,
+    folds: int = 3,
+    columns: Path | None = None,
+    vehicle_name: str = "nano",
+    replay: bool = True,
+) -> dict[str, Any]:
+    """Diagnose, replay held-out missions closed-loop, write every output; the figures."""
+    from learner.gap.diagnose import diagnose
+    from learner.gap.logs import load_mapping, read_log
+    from learner.gap.report import corrected_world_yaml, figures, write_outputs
+    from simbridge.vehicle import load_vehicle
+    from simbridge.world import load_world, resolve_world_path
+
+    if folds < 2:
+        raise ConfigError(f"--folds: {folds} is outside the allowed range [2, number of logs]")
+    mapping = load_mapping(columns)
+    world_path = resolve_world_path(world)
+    world_obj = load_world(world_path)
+    vehicle = load_vehicle(vehicle_name)
+    fit_logs = [read_log(p, mapping) for p in fitting]
+    hold_logs = [read_log(p, mapping) for p in held_out]
+    try:
+        diagnosis = diagnose(fit_logs, hold_logs, world_obj, vehicle, folds)
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    out.mkdir(parents=True, exist_ok=True)
+    closed_loop = None
+    if replay:
+        corrected = out / "corrected_world.yaml"
+        corrected.write_text(corrected_world_yaml(world_path.read_text(), diagnosis))
+        closed_loop = replay_missions(hold_logs, world_path, corrected, out / "replays")
+    write_outputs(diagnosis, out, world_path, closed_loop)
+    return figures(diagnosis, closed_loop)
+
+
+def replay_missions(logs: list, nominal: Path, corrected: Path, out: Path) -> dict | None:
+    """Fly each held-out log's mission in the nominal and the corrected world; the RMS
+    tracking difference to the logged flight before and after."""
+    from learner.gap.logs import read_log
+    from learner.gap.rollout import shrink, tracking_difference_m
+    from mission.gap_flights import fly_log
+
+    before, after = [], []
+    for log in logs:
+        mission = log.meta.get("mission")
+        if not mission or not Path(mission).exists():
+            continue
+        a = read_log(fly_log(Path(mission), nominal, out / f"{log.name}-{nominal.stem}.csv"))
+        # keyed by the corrected world's content: a rerun reuses only the same world's flight
+        key = hashlib.sha256(corrected.read_bytes()).hexdigest()[:10]
+        b = read_log(fly_log(Path(mission), corrected, out / f"{log.name}-corrected-{key}.csv"))
+        before.append(tracking_difference_m(log, a))
+        after.append(tracking_difference_m(log, b))
+    if not before:
+        return None
+    bm, am = sum(before) / len(before), sum(after) / len(after)
+    return {"flights": len(before), "before_m": bm, "after_m": am, "shrink": shrink(bm, am)}
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    result = run_diagnosis(
+        args.logs, args.holdout, args.world, args.out, args.folds, args.columns, args.vehicle,
+        not args.no_replay,
+    )  # fmt: skip
+    for effect, e in result["effects"].items():
+        print(f"{effect:20s} {e['status']}")
+    f = result["gap"]["force_rms_n"]
+    print(f"force gap {f['before'] * 1000:.2f} -> {f['after'] * 1000:.2f} mN "
+          f"(shrink {f['shrink'] * 100:.0f}%); report: {args.out / 'report.md'}")  # fmt: skip
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from mission.gap_bench import CASES, run_bench, table
+
+    names = args.cases.split(",") if args.cases else list(CASES)
+    unknown = [n for n in names if n not in CASES]
+    if unknown:
+        raise ConfigError(f"--cases: unknown case {unknown[0]!r}; known: {', '.join(CASES)}")
+    wall0 = time.perf_counter()
+    scores = run_bench([CASES[n] for n in names], args.out, args.replay)
+    scores["wall_s"] = time.perf_counter() - wall0
+    (args.out / "bench.json").write_text(json.dumps(scores, indent=1))
+    print(json.dumps(scores) if args.json else table(scores))
+    return 0

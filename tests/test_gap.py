@@ -1,0 +1,136 @@
+"""The gap diagnosis end to end on real flights (simulator and autopilot processes): a withheld
+rotor drag is found with its parameters, a null world raises no false alarm, and
+`groundfx gap diagnose` reads another vehicle's CSV through a column mapping and our own rerun
+recordings. The rotor-drag flights are flown once for the module (5 flights: 2 fitting, 1
+held out, its mission replayed in the nominal and the corrected world)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from learner.gap.logs import read_log
+from mission.cli import main
+from mission.gap_bench import CASES, run_case
+
+
+@pytest.fixture(scope="module")
+def bench_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("gap_bench")
+
+
+@pytest.fixture(scope="module")
+def drag(bench_dir: Path) -> dict[str, Any]:
+    """The rotor-drag case, its clean flights also recorded."""
+    return run_case(CASES["rotor_drag_b"], bench_dir, record=True)
+
+
+def test_withheld_rotor_drag_is_found_within_10_percent(bench_dir: Path, drag: dict) -> None:
+    result = drag
+    assert result["reported"] == ["rotor_drag"]
+    drag = result["effects"]["rotor_drag"]
+    assert max(drag["relative_errors"][:2]) <= 0.10  # kx, ky: the horizontal drag flown
+    assert result["force_shrink"] >= 0.8
+    assert result["effects"]["ceiling_effect"]["status"] == "not identifiable"  # no ceiling
+    assert result["closed_loop"]["shrink"] > 0.0  # the corrected world flies closer to the log
+    corrected = yaml.safe_load(
+        (bench_dir / "rotor_drag_b/diagnosis/corrected_world.yaml").read_text()
+    )
+    assert "rotor_drag" in [e["name"] for e in corrected["effects"]]
+    report = (bench_dir / "rotor_drag_b/diagnosis/report.md").read_text()
+    assert "| rotor_drag | present |" in report
+    assert (bench_dir / "rotor_drag_b/diagnosis/residuals.rrd").stat().st_size > 0
+
+
+def test_null_world_raises_no_false_alarm(bench_dir: Path) -> None:
+    result = run_case(CASES["null_hover"], bench_dir, replay=False)
+    assert result["reported"] == []
+    assert result["false_alarm"] is False
+
+
+def test_diagnose_reads_renamed_columns(
+    bench_dir: Path, drag: dict, tmp_path: Path, capsys
+) -> None:
+    """The bench's logs rewritten with other names and units, diagnosed through a mapping."""
+    import csv
+
+    src = sorted((bench_dir / "rotor_drag_b").glob("flight[0-9].csv"))
+    renamed = []
+    for path in src:
+        rows = list(csv.reader(ln for ln in path.open() if not ln.startswith("#")))
+        header = ["T_ms" if h == "time_s" else f"their_{h}" for h in rows[0]]
+        it = rows[0].index("time_s")
+        body = [[str(float(v) * 1000) if i == it else v for i, v in enumerate(r)] for r in rows[1:]]
+        out = tmp_path / path.name
+        with out.open("w", newline="") as f:
+            csv.writer(f).writerows([header, *body])
+        renamed.append(out)
+    mapping = tmp_path / "columns.yaml"
+    names = {h: f"their_{h}" for h in rows[0] if h != "time_s"} | {"time_s": "T_ms"}
+    mapping.write_text(yaml.safe_dump({"names": names, "units": {"time_s": "ms"}}))
+    world = bench_dir / "rotor_drag_b/nominal_world.yaml"
+    code = main(
+        ["gap", "diagnose", *map(str, renamed), "--world", str(world), "--columns", str(mapping),
+         "--folds", "2", "--no-replay", "--out", str(tmp_path / "out")]
+    )  # fmt: skip
+    assert code == 0
+    figures = json.loads((tmp_path / "out/gap.json").read_text())
+    assert figures["effects"]["rotor_drag"]["status"] == "present"
+    assert "rotor_drag" in capsys.readouterr().out
+    # a bad mapping names the column
+    mapping.write_text(yaml.safe_dump({"names": {"time_s": "nope"}}))
+    assert main(["gap", "diagnose", str(renamed[0]), "--world", str(world), "--columns",
+                 str(mapping), "--no-replay", "--out", str(tmp_path / "bad")]) == 2  # fmt: skip
+    assert "missing column 'nope'" in capsys.readouterr().err
+
+
+def test_diagnose_reads_recordings(bench_dir: Path, drag: dict, tmp_path: Path) -> None:
+    """A flight's rerun recording gives the rows of its --flight-log CSV; the diagnosis on
+    recordings finds the withheld rotor drag."""
+    folder = bench_dir / "rotor_drag_b"
+    csv_log, rec_log = (
+        read_log(folder / "flight0.truth.csv"),
+        read_log(folder / "flight0.truth.rrd"),
+    )
+    assert len(rec_log) == len(csv_log) > 1000
+    np.testing.assert_allclose(rec_log.time_s, csv_log.time_s, atol=1e-9)
+    for field in ("position_m", "quaternion", "rotor_speeds_rad_s", "acceleration_m_s2"):
+        np.testing.assert_allclose(getattr(rec_log, field), getattr(csv_log, field), atol=1e-6)
+    recordings = [str(folder / f"flight{s}.truth.rrd") for s in (0, 1, 100)]
+    world = str(folder / "nominal_world.yaml")
+    code = main(["gap", "diagnose", *recordings[:2], "--holdout", recordings[2], "--world", world,
+                 "--folds", "2", "--no-replay", "--out", str(tmp_path / "out")])  # fmt: skip
+    assert code == 0
+    figures = json.loads((tmp_path / "out/gap.json").read_text())
+    drag_fit = figures["effects"]["rotor_drag"]
+    assert drag_fit["status"] == "present"
+    truth = CASES["rotor_drag_b"].truth["rotor_drag"]
+    for p in ("kx", "ky"):
+        assert drag_fit["parameters"][p]["value"] == pytest.approx(truth[p], rel=0.10)
+
+
+def test_torque_residual_vanishes_on_a_clean_flight_with_the_true_world(
+    bench_dir: Path, drag: dict
+) -> None:
+    """Equation 3.6 and the ground effect's hub torques explain a clean flight's rotational
+    dynamics; leaving the ground effect out leaves its torque."""
+    from learner.gap.candidates import nominal_values
+    from learner.gap.flightdata import prepare
+    from learner.gap.torque import torque_gap, torque_residual_n_m
+    from simbridge.vehicle import load_vehicle
+    from simbridge.world import load_world
+
+    folder = bench_dir / "rotor_drag_b"
+    vehicle, world = load_vehicle("nano"), load_world(folder / "real_world.yaml")
+    d = prepare(read_log(folder / "flight0.truth.csv"), world, vehicle)
+    true = nominal_values(world.effects)
+    residual = torque_residual_n_m(d, true, vehicle)
+    assert np.sqrt(np.mean(residual**2)) < 1e-6  # rotor moments: about 1e-4 N m
+    without_ge = {k: v for k, v in true.items() if k != "ground_effect"}
+    gap = torque_gap([d], without_ge, true, vehicle)
+    assert gap["shrink"] > 0.9

@@ -1,0 +1,140 @@
+"""The gap diagnosis's statistics, geometry and log reading on synthetic data (no flights)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from learner.gap.geometry import height_below_m, wall_distances_m
+from learner.gap.logs import ColumnMapping, FlightLog, read_log, write_log
+from learner.gap.stats import (
+    benjamini_hochberg,
+    bootstrap_mean,
+    bootstrap_p,
+    effective_sample_size,
+    holm,
+)
+from simbridge.config import ConfigError
+from simbridge.effects.ground import thrust_gain, thrust_gain_array
+from simbridge.frames import quat_enu_flu_to_ned_frd
+from simbridge.world import Box
+
+Q_LEVEL_NED = quat_enu_flu_to_ned_frd((1.0, 0.0, 0.0, 0.0))
+
+
+def test_effective_sample_size_of_an_ar1_series_matches_theory() -> None:
+    rng = np.random.default_rng(1)
+    phi, n = 0.9, 20000
+    x = np.zeros(n)
+    e = rng.normal(size=n)
+    for i in range(1, n):
+        x[i] = phi * x[i - 1] + e[i]
+    expected = n * (1 - phi) / (1 + phi)  # about 1050
+    assert effective_sample_size(x) == pytest.approx(expected, rel=0.25)
+    assert effective_sample_size(rng.normal(size=n)) == pytest.approx(n, rel=0.1)
+
+
+def test_flight_bootstrap_interval_covers_the_mean_and_widens_with_flight_spread() -> None:
+    rng = np.random.default_rng(2)
+    offsets = rng.normal(0.0, 1.0, 8)  # each flight its own offset: samples are correlated
+    sums = np.array([[100 * (0.5 + o)] for o in offsets])
+    counts = np.full((8, 1), 100.0)
+    draws = bootstrap_mean(sums, counts, 4000, rng)
+    lo, hi = np.percentile(draws[:, 0], [2.5, 97.5])
+    assert lo < sums.sum() / counts.sum() < hi
+    assert hi - lo > 0.8  # as wide as the flights' spread, not the samples' count
+    assert bootstrap_p(np.full((1000, 1), 3.0))[0] < 0.01
+    assert bootstrap_p(rng.normal(0, 1, (1000, 1)))[0] > 0.2
+
+
+def test_multiple_comparison_corrections() -> None:
+    p = np.array([0.01, 0.04, 0.03, 0.2])
+    assert holm(p) == pytest.approx([0.04, 0.09, 0.09, 0.2])
+    assert benjamini_hochberg(p) == pytest.approx([0.04, 0.16 / 3, 0.16 / 3, 0.2])
+
+
+def test_array_ground_effect_gain_is_the_simulators_formula() -> None:
+    heights = np.array([0.005, 0.02, 0.05, 0.3, np.inf])
+    got = thrust_gain_array(heights, 2.0, 0.047, 0.03)
+    assert got == pytest.approx([thrust_gain(h, 2.0, 0.047, 0.03) for h in heights])
+
+
+def test_geometry_heights_and_walls() -> None:
+    box = Box(center_m=(1.0, 0.0, 0.05), size_m=(0.3, 0.3, 0.1), yaw_deg=45.0)
+    pts = np.array([[1.0, 0.0, 0.3], [0.0, 0.0, 0.3], [1.0, 0.0, 5.0]])
+    assert height_below_m(pts, (box,), 3.0) == pytest.approx([0.2, 0.3, np.inf])
+    wall = Box(center_m=(0.0, 0.6, 1.0), size_m=(4.0, 0.1, 2.0))
+    d = wall_distances_m(np.array([[0.0, 0.3, 0.5], [0.0, -0.3, 0.5]]), (wall,), 0.5)
+    assert d[0] == pytest.approx([np.inf, np.inf, 0.25, np.inf])
+    assert np.all(np.isinf(d[1]))
+
+
+def test_csv_with_renamed_columns_units_and_ned_frame(tmp_path) -> None:
+    n = 20
+    t = np.arange(n) * 0.01
+    log = FlightLog(
+        "ours", t, np.tile([1.0, 2.0, 3.0], (n, 1)), np.tile([0.1, 0.2, -0.3], (n, 1)),
+        np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), np.tile([0.01, 0.02, 0.03], (n, 1)),
+        np.full((n, 4), 76.0),
+    )  # fmt: skip
+    path = write_log(log, tmp_path / "ours.csv")
+    text = path.read_text().splitlines()
+    # rename, rescale to ms and rpm, write the position in NED
+    header = text[1].split(",")
+    rows = [list(map(float, r.split(","))) for r in text[2:]]
+    i = {h: k for k, h in enumerate(header)}
+    out = ["T,N,E,D,vn,ve,vd,qw,qx,qy,qz,p,q,r,m0,m1,m2,m3"]
+    for r in rows:
+        out.append(",".join(str(v) for v in (
+            r[i["time_s"]] * 1000, r[i["y_m"]], r[i["x_m"]], -r[i["z_m"]],
+            r[i["vy_m_s"]], r[i["vx_m_s"]], -r[i["vz_m_s"]],
+            *Q_LEVEL_NED,
+            r[i["p_rad_s"]], -r[i["q_rad_s"]], -r[i["r_rad_s"]],
+            *(r[i[f"n{k}_rad_s"]] * 60 / (2 * np.pi) for k in range(4)),
+        )))  # fmt: skip
+    theirs = tmp_path / "theirs.csv"
+    theirs.write_text("\n".join(out) + "\n")
+    names = dict(zip(
+        ["time_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "p_rad_s", "q_rad_s",
+         "r_rad_s", "n0_rad_s", "n1_rad_s", "n2_rad_s", "n3_rad_s"],
+        ["T", "N", "E", "D", "vn", "ve", "vd", "p", "q", "r", "m0", "m1", "m2", "m3"], strict=True,
+    ))  # fmt: skip
+    units = {"time_s": "ms"} | {f"n{k}_rad_s": "rpm" for k in range(4)}
+    mapping = ColumnMapping(names=names, units=units, frame="ned_frd")
+    got = read_log(theirs, mapping)
+    assert got.time_s == pytest.approx(t)
+    assert got.position_m[0] == pytest.approx([1.0, 2.0, 3.0])
+    assert got.velocity_m_s[0] == pytest.approx([0.1, 0.2, -0.3])
+    assert got.body_rates_rad_s[0] == pytest.approx([0.01, 0.02, 0.03])
+    assert got.rotor_speeds_rad_s[0] == pytest.approx([76.0] * 4)
+    assert abs(got.quaternion[0, 0]) == pytest.approx(1.0)  # level, yaw 0 in ENU
+    with pytest.raises(ConfigError, match="missing column 'T'"):
+        read_log(path, mapping)
+    with pytest.raises(ConfigError, match=r"units\.time_s"):
+        ColumnMapping(units={"time_s": "fortnights"})
+
+
+def test_block_sandwich_interval_matches_the_spread_under_correlated_misfit() -> None:
+    """A slope fitted through a slowly varying misfit (AR(1), phi 0.98): the white-noise
+    standard error is far too small; the 1 s block sandwich is about the true spread."""
+    from scipy.signal import lfilter
+
+    from learner.gap.fit import _block_ids, block_sandwich
+
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 60.0, 0.01)
+    x = np.sin(0.7 * t) + 0.3 * np.sin(3.1 * t)
+    slopes, naive, robust = [], [], []
+    for _ in range(200):
+        e = lfilter([1.0], [1.0, -0.98], rng.normal(0.0, 0.05, len(t)))
+        y = 2.0 * x + e
+        jac = x[:, None]
+        bread = np.linalg.inv(jac.T @ jac)
+        b = float((bread @ jac.T @ y)[0])
+        r = jac[:, 0] * b - y
+        slopes.append(b)
+        naive.append(np.sqrt(bread[0, 0] * (r @ r) / (len(t) - 1)))
+        robust.append(np.sqrt(block_sandwich(bread, jac, r, _block_ids(t, 0))[0, 0]))
+    spread = np.std(slopes)
+    assert np.median(naive) < 0.3 * spread
+    assert 0.75 * spread < np.median(robust) < 1.25 * spread
