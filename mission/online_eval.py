@@ -34,7 +34,7 @@ from simbridge.world import resolve_world_path
 DEFAULT_HOLD_S = 10.0
 
 
-def _trial_file(directory: Path, seed: int, hold_s: float) -> tuple[Path, str]:
+def trial_file(directory: Path, seed: int, hold_s: float) -> tuple[Path, str]:
     mission, start = landing_trial(seed)
     mission["waypoints"][-1]["hold_s"] = hold_s
     path = directory / f"trial_{seed}.yaml"
@@ -42,13 +42,13 @@ def _trial_file(directory: Path, seed: int, hold_s: float) -> tuple[Path, str]:
     return path, start
 
 
-def _world_file(directory: Path, rho: float) -> Path:
+def world_file(directory: Path, rho: float) -> Path:
     path = directory / f"world_rho{rho:g}.yaml"
     path.write_text(world_yaml_with_rho(resolve_world_path("default").read_text(), rho))
     return path
 
 
-def _hold_error(
+def hold_error(
     mission: Path, start: str, world: Path, model: str, rho: float, network: str | None, *extra: str
 ) -> float:
     summary = fly(
@@ -81,10 +81,10 @@ def run_online_eval(
     extra = tuple(a for p in params for a in ("--param", p))
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
-        trials = [_trial_file(d, seed, hold_s) for seed in seeds]
+        trials = [trial_file(d, seed, hold_s) for seed in seeds]
         adapted: dict[str, list[Path]] = {m: [] for m in methods}
         for rho in rhos:
-            world = _world_file(d, rho)
+            world = world_file(d, rho)
             errors: dict[str, np.ndarray] = {}
             conditions = [("offline", "neural", ()), ("analytic", "analytic", ())]
             conditions += [(m, "neural", ("--online", m, *extra)) for m in methods]
@@ -98,7 +98,7 @@ def run_online_eval(
                         save = ("--save-model", str(path))
                     net = None if model == "analytic" else network
                     values.append(
-                        _hold_error(mission, start, world, model, rho, net, *options, *save)
+                        hold_error(mission, start, world, model, rho, net, *options, *save)
                     )
                 errors[name] = np.array(values)
                 _say_row(say, f"rho_sim {rho:g}", name, errors[name])
@@ -128,14 +128,14 @@ def _remember(
     say: Callable[[str], None],
 ) -> dict[str, Any]:
     """4.4: back at rho = 1 with the networks adapted at rho = 2, learning off."""
-    world = _world_file(d, 1.0)
-    offline = np.array([_hold_error(m, s, world, "neural", 1.0, network) for m, s in trials])
+    world = world_file(d, 1.0)
+    offline = np.array([hold_error(m, s, world, "neural", 1.0, network) for m, s in trials])
     _say_row(say, "rho_sim 1 again", "offline", offline)
     out: dict[str, Any] = {"offline_m": offline.tolist(), "forgetting_m": {}}
     for method in methods:
         errors = np.array(
             [
-                _hold_error(m, s, world, "neural", 1.0, str(path))
+                hold_error(m, s, world, "neural", 1.0, str(path))
                 for (m, s), path in zip(trials, adapted[method], strict=True)
             ]
         )

@@ -234,3 +234,23 @@ def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_pau
     assert len(read_recording(rrd).scalars("plots/learner/loss")[0]) == a["online_updates"]
     paused = flight("--online", "naive", "--param", "GFX_OL_PAUSE=1")
     assert paused["online_version"] == 0 and paused["online_ignored_paused"] > 100
+
+
+def test_a_protecting_method_adapts_to_rho2_and_forgets_less_than_naive(tmp_path):
+    """Experiments 4.3/4.4 at the smallest scale (seed 0, deterministic): the rho1 network
+    adapted in a rho_sim = 2 world by `constraint` holds closer than offline-only there, and
+    carried back to rho = 1 (learning off) it holds closer than the network `naive` adapted."""
+    from mission.online_eval import hold_error, trial_file, world_file
+
+    mission, start = trial_file(tmp_path, 0, 10.0)
+    rho2, rho1 = world_file(tmp_path, 2.0), world_file(tmp_path, 1.0)
+    lam = ("--param", "GFX_OL_LAMBDA=1000")
+    offline = hold_error(mission, start, rho2, "neural", 2.0, "rho1")
+    errors = {}
+    for method in ("naive", "constraint"):
+        saved = tmp_path / f"{method}.npz"
+        adapting = ("--online", method, *lam, "--save-model", str(saved))
+        errors[method] = hold_error(mission, start, rho2, "neural", 2.0, "rho1", *adapting)
+        errors[method + " at rho 1"] = hold_error(mission, start, rho1, "neural", 1.0, str(saved))
+    assert errors["constraint"] < offline, errors
+    assert errors["constraint at rho 1"] < errors["naive at rho 1"], errors
