@@ -39,7 +39,6 @@ def add_online_options(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--save-model",
-        "--save-network",  # the name mission/experiments asks for
         dest="save_model",
         type=Path,
         help="save the adapted network here at the end",
