@@ -186,3 +186,16 @@ def test_selection_rule_needs_criterion_significance_and_held_out_gain() -> None
     assert not selected(5.0, 0.5 * ALPHA, tried=3, cv_gain=0.001)  # Bonferroni over 3 tried
     assert not selected(-1.0, 1e-9, tried=1, cv_gain=0.5)  # the criterion rose
     assert not selected(5.0, 1e-9, tried=1, cv_gain=-1e-4)  # worse on the flights left out
+
+
+def test_selection_rule_ignores_significant_but_tiny_effects() -> None:
+    """A 1 ms IMU delay (an eighth of the catalogue's 8 ms) riding on a large effect's misfit is
+    not reported however significant; a ground effect raised from the nominal rho 1 to 1.6 is."""
+    from learner.gap.fit import MIN_SIZE, effect_size, selected
+
+    tiny = effect_size("sensor_latency", np.array([0.001]), {})
+    assert tiny < MIN_SIZE
+    assert not selected(50.0, 1e-30, tried=5, cv_gain=0.001, size=tiny)
+    ground = effect_size("ground_effect", np.array([1.6]), {"ground_effect": np.array([1.0])})
+    assert ground == pytest.approx(0.6)
+    assert selected(50.0, 1e-30, tried=5, cv_gain=0.001, size=ground)
