@@ -199,3 +199,12 @@ def test_selection_rule_ignores_significant_but_tiny_effects() -> None:
     ground = effect_size("ground_effect", np.array([1.6]), {"ground_effect": np.array([1.0])})
     assert ground == pytest.approx(0.6)
     assert selected(50.0, 1e-30, tried=5, cv_gain=0.001, size=ground)
+
+
+def test_selection_rule_rejects_a_fit_on_its_bounds() -> None:
+    from learner.gap.fit import at_bound, selected
+
+    assert at_bound("thrust_mass", np.array([-0.5]))
+    assert not at_bound("thrust_mass", np.array([0.04]))
+    assert not at_bound("rotor_drag", np.array([4e-5, 4e-5, 0.0]))  # no drag along z
+    assert not selected(50.0, 1e-30, tried=1, cv_gain=0.01, size=10.0, interior=False)
