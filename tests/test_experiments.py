@@ -15,7 +15,7 @@ import yaml
 from scipy import stats
 
 from learner.stats import compare, hedges_g, verdict
-from mission.experiments import campaign, definitions, report, runner
+from mission.experiments import campaign, definitions, report
 from mission.experiments.definitions import EXPERIMENTS, Flight, Trial, plan
 from mission.experiments.missions import OBSTACLE_TARGETS, make_mission
 from simbridge.world import resolve_world_path
@@ -116,23 +116,6 @@ def test_results_file_skips_a_torn_line_and_failed_trials(tmp_path: Path) -> Non
     with path.open("a") as f:
         f.write('{"id": "c", "metr')  # killed while writing
     assert list(campaign.load_results(path)) == ["a"]
-
-
-def test_online_experiments_fail_clearly_until_the_autopilot_learns_online(
-    tmp_path: Path,
-) -> None:
-    if runner.missing_for(EXPERIMENTS["4.3"].conditions[1].flights) is None:
-        pytest.skip("the autopilot has --online: experiments 4.3-4.5 run for real")
-    done = subprocess.run(
-        [sys.executable, "-m", "mission.cli", "experiment", "4.4", "--out", str(tmp_path)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert done.returncode == 2
-    assert "experiment 4.4 cannot run: online learning is missing" in done.stderr
-    assert "--online" in done.stderr and "Traceback" not in done.stderr
-    assert not (tmp_path / campaign.RESULTS_FILE).exists()
 
 
 def test_bad_arguments_name_the_option() -> None:

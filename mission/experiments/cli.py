@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
@@ -52,27 +51,16 @@ def add_experiment_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    from mission.experiments import campaign, definitions, report, runner
+    from mission.experiments import campaign, definitions, report
 
     t0 = time.perf_counter()
     try:
         experiments = definitions.select(args.name)
     except KeyError as err:
         raise ConfigError(str(err.args[0])) from None
-    skipped: dict[str, str] = {}
-    for e in experiments:
-        why = runner.missing_for(tuple(f for c in e.conditions for f in c.flights))
-        if why:
-            skipped[e.key] = why
-    if len(experiments) == 1 and skipped:
-        key = experiments[0].key
-        raise ConfigError(f"experiment {key} cannot run: {skipped[key]}")
-    for key, why in skipped.items():
-        print(f"groundfx experiment: skipping {key}: {why}", file=sys.stderr)
-    runnable = [e for e in experiments if e.key not in skipped]
     plans = {e.key: definitions.plan(e, args.trials, args.seed) for e in experiments}
-    artefacts = campaign.prepare_artefacts(runnable, args.out)
-    trials = [t for e in runnable for t in plans[e.key]]
+    artefacts = campaign.prepare_artefacts(experiments, args.out)
+    trials = [t for e in experiments for t in plans[e.key]]
     results = campaign.run_trials(
         trials,
         args.out,
@@ -85,9 +73,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     all_values = {}
     verdict_lines = []
     for e in experiments:
-        _, values, rows = report.experiment_report(
-            e, plans[e.key], results, args.out / e.key, skipped.get(e.key)
-        )
+        _, values, rows = report.experiment_report(e, plans[e.key], results, args.out / e.key)
         all_values[e.key] = values
         verdict_lines += [
             f"- {e.key} `{r['expectation'].a}` vs `{r['expectation'].b}` "
@@ -101,7 +87,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     lines = [
         "# Experiments: summary",
         "",
-        f"{len(trials)} trials ({unfinished} unfinished) of {len(runnable)} experiments in "
+        f"{len(trials)} trials ({unfinished} unfinished) of {len(experiments)} experiments in "
         f"{wall_s / 60:.1f} min wall time (this run; finished trials of earlier runs were "
         "kept). Mean [95% CI].",
         "",
@@ -110,7 +96,6 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         "## Expectations",
         "",
         *verdict_lines,
-        *(f"- {k}: not run: {why}" for k, why in skipped.items()),
         "",
     ]
     (args.out / "summary.md").write_text("\n".join(lines))
@@ -120,4 +105,4 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         f"{wall_s / 60:.1f} min; reports in {args.out}/<experiment>/report.md, summary in "
         f"{args.out / 'summary.md'}"
     )
-    return 1 if unfinished or skipped else 0
+    return 1 if unfinished else 0

@@ -125,16 +125,10 @@ def experiment_report(
     trials: list[Trial],
     results: dict[str, dict[str, Any]],
     folder: Path,
-    skipped: str | None = None,
 ) -> tuple[Path, dict[str, dict[str, np.ndarray]], list[dict[str, Any]]]:
     """Write folder/report.md and folder/errors.png; returns them with the values and rows."""
     folder.mkdir(parents=True, exist_ok=True)
     lines = [f"# Experiment {experiment.key}: {experiment.title}", "", experiment.question, ""]
-    if skipped:
-        lines += [f"**Not run**: {skipped}.", ""]
-        path = folder / "report.md"
-        path.write_text("\n".join(lines))
-        return path, {}, []
     values = condition_values(experiment, trials, results)
     missing = [t.id for t in trials if t.id not in results]
     seeds = sorted({t.seed for t in trials})

@@ -4,12 +4,9 @@ the same result wherever it runs. This is what a pool worker or a Ray task execu
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import tempfile
 import time
 import traceback
-from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -21,10 +18,10 @@ from mission.fly import fly
 from mission.gather import world_yaml_with_rho
 from simbridge.world import resolve_world_path
 
-# What the online branch gives the autopilot (and `groundfx fly`): the method by name, and the
-# adapted network written at the end of the flight (4.4 flies it again).
+# The autopilot's options for online learning: the method by name, and the adapted network
+# written at the end of the flight (4.4 flies it again).
 ONLINE_OPTION = "--online"
-SAVE_NETWORK_OPTION = "--save-network"
+SAVE_NETWORK_OPTION = "--save-model"
 # A starved machine can stall a process past the autopilot's 1 s link timeout: the flight is
 # flown again (it is deterministic, so the retry gives what an unstarved flight would have).
 LINK_LOST = "lost the simulator link"
@@ -42,33 +39,6 @@ KEPT = (
     "wall_s",
     "rtf",
 )
-
-
-@cache
-def autopilot_help() -> str:
-    done = subprocess.run(
-        [sys.executable, "-m", "mission.cli", "autopilot", "--help"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    return done.stdout
-
-
-def missing_for(trial_flights: tuple[Flight, ...]) -> str | None:
-    """Why these flights cannot be flown by this groundfx, or None."""
-    needs = []
-    if any(f.online for f in trial_flights):
-        needs.append(ONLINE_OPTION)
-    if any(f.carry_network for f in trial_flights):
-        needs.append(SAVE_NETWORK_OPTION)
-    missing = [o for o in needs if o not in autopilot_help()]
-    if not missing:
-        return None
-    return (
-        f"online learning is missing: `groundfx autopilot` has no {' and no '.join(missing)} "
-        "option (branch `online` has not landed)"
-    )
 
 
 def _world_file(flight: Flight, tmp: Path) -> str:
