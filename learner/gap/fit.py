@@ -134,7 +134,7 @@ def fit(problem: Problem, names: tuple[str, ...]) -> Fit:
         bread = np.linalg.pinv(sol.jac.T @ sol.jac)
         cov = bread * sigma2 / problem.ess_ratio
         robust = block_sandwich(bread, sol.jac, sol.fun, np.repeat(blocks, 3))
-        var = np.maximum(np.diag(cov), np.diag(robust))
+        var = np.maximum(np.maximum(np.diag(cov), np.diag(robust)), 0.0)  # pinv: tiny negatives
         # the robust correlations (the white ones where a score vanished), the larger variances
         corr_from = np.where(np.outer(np.diag(robust), np.diag(robust)) > 0, robust, cov)
         d = np.sqrt(np.maximum(np.diag(corr_from), 1e-300))
