@@ -82,3 +82,13 @@ def benjamini_hochberg(p: np.ndarray) -> np.ndarray:
     out = np.empty(m)
     out[order] = np.minimum(adj, 1.0)
     return out
+
+
+def wald_p(delta: np.ndarray, cov: np.ndarray) -> float:
+    """p-value of 'delta = 0' from an estimate `delta` with covariance `cov`: the Wald
+    statistic delta' cov^-1 delta against a chi-squared law with len(delta) degrees of freedom."""
+    from scipy.stats import chi2
+
+    delta = np.atleast_1d(np.asarray(delta, dtype=float))
+    stat = float(delta @ np.linalg.pinv(np.atleast_2d(cov)) @ delta)
+    return float(chi2.sf(stat, len(delta))) if np.isfinite(stat) else 1.0
