@@ -19,7 +19,6 @@ import rerun as rr
 
 from autopilot.blueprint import default_blueprint
 from autopilot.controller import ControlOutput, FlightState, Setpoint
-from autopilot.flight_log import kinematic_acceleration_m_s2
 from autopilot.mission_items import PlanStep
 from autopilot.recorder import FLUSH_WALL_S, RecordOptions
 from autopilot.recorder_rows import RowSender, scalars_key
@@ -130,6 +129,7 @@ class FlightRecorder:
         if armed != self._armed:
             self._armed = armed
             self._events.append((t_s, "INFO", "armed" if armed else "disarmed"))
+        sensor = msgs.sensor
         truth = msgs.latest.get(TRUTH) if TRUTH in msgs.new else None
         true_ge = (
             (truth["x"], truth["y"], truth["z"])
@@ -158,7 +158,8 @@ class FlightRecorder:
                 *actual,
                 *desired,
                 *state.angular_velocity_body_rad_s,
-                *(kinematic_acceleration_m_s2(msgs, state) if "xacc" in msgs.sensor else NAN3),
+                # the accelerometer as sent (FRD); turned into the world frame at the flush
+                *((sensor["xacc"], sensor["yacc"], sensor["zacc"]) if "xacc" in sensor else NAN3),
             )
         )
         self._last_t = t_s

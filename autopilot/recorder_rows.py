@@ -24,7 +24,9 @@ from autopilot.recording import (
 )
 from autopilot.rrbatch import ColumnBatch
 from autopilot.trail import Trail, firsts
+from simbridge.frames import quat_to_matrices
 from simbridge.hil import RAD_S_TO_RPM
+from simbridge.vehicle import GRAVITY_M_S2
 
 
 class Row:
@@ -32,7 +34,8 @@ class Row:
     (w, x, y, z); setpoint position m and velocity m/s (NaN: none); height m; mode index;
     predicted ground effect N; commanded rotor speeds rad/s; true ground effect N (NaN: not
     received this step); actual rotor speeds rpm (NaN: not received); desired roll, pitch rad
-    (NaN: no control output); body rates rad/s; acceleration m/s^2 (world, gravity removed)."""
+    (NaN: no control output); body rates rad/s; the accelerometer's specific force m/s^2
+    (body FRD; logged as the world acceleration, gravity removed)."""
 
     T, P, V, Q, SP, SPV, H, MODE, GE, N, TRUE, ACT, DES, RATES, ACC = (
         0, 1, 4, 7, 11, 14, 17, 18, 19, 22, 26, 29, 33, 35, 38,
@@ -61,6 +64,15 @@ def scalars_key(path: str) -> str:
 
 def _scalars(width: int) -> Any:
     return rr.Scalars.columns(scalars=np.zeros((1, width)))
+
+
+def world_acceleration(q: np.ndarray, specific_force_frd: np.ndarray) -> np.ndarray:
+    """The accelerometer's specific force (body FRD, m/s^2) in the world frame, gravity
+    removed: as autopilot.flight_log.kinematic_acceleration_m_s2, for many steps at once."""
+    flu = specific_force_frd * np.array([1.0, -1.0, -1.0])
+    world = np.einsum("nij,nj->ni", quat_to_matrices(q), flu)
+    world[:, 2] -= GRAVITY_M_S2
+    return world
 
 
 class RowSender:
@@ -109,7 +121,7 @@ class RowSender:
             scalars_key("plots/rotors/commanded"): a[:, r.N : r.N + 4],
             scalars_key("plots/attitude"): q,
             scalars_key("plots/rates"): a[:, r.RATES : r.RATES + 3],
-            scalars_key("plots/acceleration"): a[:, r.ACC : r.ACC + 3],
+            scalars_key("plots/acceleration"): world_acceleration(q, a[:, r.ACC : r.ACC + 3]),
         }
         for i, axis in enumerate("xyz"):
             values[scalars_key(f"plots/ground_effect/{axis}/predicted")] = ge[:, i]

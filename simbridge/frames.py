@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
 Mat3 = tuple[float, float, float, float, float, float, float, float, float]  # row-major
@@ -67,6 +69,19 @@ def quat_to_matrix(q: Quat) -> Mat3:
         2 * (x * z - w * y),
         2 * (y * z + w * x),
         1 - 2 * (x * x + y * y),
+    )
+
+
+def quat_to_matrices(q: np.ndarray) -> np.ndarray:
+    """quat_to_matrix for many: (N, 4) w, x, y, z -> (N, 3, 3)."""
+    w, x, y, z = q.T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=1,
     )
 
 

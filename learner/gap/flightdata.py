@@ -11,6 +11,7 @@ from scipy.signal import savgol_filter
 
 from learner.gap.geometry import distance_above_m, height_below_m, wall_distances_m
 from learner.gap.logs import FlightLog
+from simbridge import frames
 from simbridge.effects.proximity import WallEffectParams
 from simbridge.vehicle import Vehicle
 from simbridge.world import World
@@ -43,16 +44,8 @@ class FlightData:
 
 
 def quat_to_matrices(q: np.ndarray) -> np.ndarray:
-    """(N, 4) w, x, y, z -> (N, 3, 3) rotation matrices."""
-    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        axis=1,
-    )
+    """(N, 4) w, x, y, z -> (N, 3, 3) rotation matrices, the quaternions normalised first."""
+    return frames.quat_to_matrices(q / np.linalg.norm(q, axis=1, keepdims=True))
 
 
 def _previous(a: np.ndarray, new_segment: np.ndarray) -> np.ndarray:
