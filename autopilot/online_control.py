@@ -56,6 +56,8 @@ def settings_from(params: ParamStore, base: Any = None) -> Any:
         penalty=p.penalty,
         margin=p.margin,
         forgetting=p.forgetting,
+        rls_initial_covariance=p.rls_covariance,
+        rls_scale_sd=p.rls_scale_sd,
     )
 
 

@@ -72,6 +72,12 @@ class OnlineParams:
     penalty: float = param(1.0, lo=0.0, hi=1e6, doc="lambda of constraint, margin, ewc")
     margin: float = param(0.02, lo=0.0, hi=10.0, doc="free deviation per weight (margin)")
     forgetting: float = param(0.95, lo=0.5, hi=1.0, doc="RLS forgetting factor per sample")
+    rls_covariance: float = param(
+        1e-6, lo=1e-9, hi=1e6, doc="RLS initial covariance p0 (trust in the offline shape)"
+    )
+    rls_scale_sd: float = param(
+        1.0, lo=0.0, hi=100.0, doc="RLS prior sd of a change of the effect's size"
+    )
     pause: int = param(0, lo=0, hi=1, doc="1: samples are ignored, the weights stay")
     reset: int = param(0, lo=0, hi=1, doc="1: back to the offline weights (then reads 0 again)")
 
@@ -118,6 +124,8 @@ NAMES: dict[str, tuple[str, str]] = {
     "GFX_OL_LAMBDA": ("online", "penalty"),
     "GFX_OL_MARGIN": ("online", "margin"),
     "GFX_OL_FORGET": ("online", "forgetting"),
+    "GFX_OL_RLS_P0": ("online", "rls_covariance"),
+    "GFX_OL_RLS_SC": ("online", "rls_scale_sd"),
     "GFX_OL_PAUSE": ("online", "pause"),
     "GFX_OL_RESET": ("online", "reset"),
 }

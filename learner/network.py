@@ -2,8 +2,17 @@
 
 12 -> 25 -> 30 -> 15 -> 3, ReLU. Spectral normalisation as Neural Lander applies it: after
 every optimiser step each weight matrix whose spectral norm exceeds the per-layer bound
-(default 2) is scaled back onto it, so the network's Lipschitz constant (in standardised
-units) is at most the product of the bounds.
+(default 4, learner.bounds says why not Neural Lander's 2) is scaled back onto it, so the
+network's Lipschitz constant (in standardised units) is at most the product of the bounds.
+
+The rotor speeds are the control input, and the controller finds the input that the
+prediction itself depends on (a fixed point). Neural Lander's stability condition is that the
+prediction's Lipschitz constant in the control input is below 1 (newtons of predicted force
+per newton of thrust). The overall bound in standardised units is far looser than that: the
+columns of the first layer that read the rotor speeds get their own, tighter bound
+(`control_column_bound`). Without it the network learns the shortcut f_z = m g - thrust,
+which fits every hover sample at any height and rho: near the ground that shortcut has a slope
+of -1 in thrust, and the controller's fixed point drifts.
 """
 
 from __future__ import annotations
@@ -13,8 +22,22 @@ import itertools
 import numpy as np
 import torch
 
+from learner.bounds import (
+    CONTROL_COLUMNS,
+    DEFAULT_CONTROL_GAIN_BOUND,
+    DEFAULT_LAYER_BOUND,
+    control_column_bound,
+)
+
+__all__ = [
+    "CONTROL_COLUMNS",
+    "DEFAULT_CONTROL_GAIN_BOUND",
+    "DEFAULT_LAYER_BOUND",
+    "LAYERS",
+    "control_column_bound",
+]
+
 LAYERS = (12, 25, 30, 15, 3)
-DEFAULT_LAYER_BOUND = 2.0
 
 
 def build_network(layers: tuple[int, ...] = LAYERS, seed: int = 0) -> torch.nn.Sequential:
@@ -32,12 +55,27 @@ def linear_layers(net: torch.nn.Sequential) -> list[torch.nn.Linear]:
 
 
 @torch.no_grad()
-def project_lipschitz(net: torch.nn.Sequential, layer_bound: float) -> None:
-    """Scale every weight matrix back to spectral norm <= layer_bound (exact, by SVD)."""
+def project_control_columns(w: torch.Tensor, bound: float | None) -> None:
+    """The first layer's rotor-speed columns back to spectral norm <= bound (exact)."""
+    if bound is None:
+        return
+    cols = list(CONTROL_COLUMNS)
+    sigma = torch.linalg.matrix_norm(w[:, cols], ord=2)
+    if sigma > bound:
+        w[:, cols] *= bound / sigma
+
+
+@torch.no_grad()
+def project_lipschitz(
+    net: torch.nn.Sequential, layer_bound: float, control_bound: float | None = None
+) -> None:
+    """Scale every weight matrix back to spectral norm <= layer_bound (exact, by SVD), and
+    the rotor-speed columns to control_bound."""
     for layer in linear_layers(net):
         sigma = torch.linalg.matrix_norm(layer.weight, ord=2)
         if sigma > layer_bound:
             layer.weight.mul_(layer_bound / sigma)
+    project_control_columns(linear_layers(net)[0].weight, control_bound)
 
 
 class LipschitzProjector:
@@ -46,12 +84,19 @@ class LipschitzProjector:
     so the persistent vectors track the top singular pair. A small margin covers what the
     estimate may miss; `finish` projects exactly once at the end."""
 
-    def __init__(self, net: torch.nn.Sequential, layer_bound: float, seed: int = 0) -> None:
+    def __init__(
+        self,
+        net: torch.nn.Sequential,
+        layer_bound: float,
+        seed: int = 0,
+        control_bound: float | None = None,
+    ) -> None:
         self.layers = linear_layers(net)
         self.bound = layer_bound
+        self.control_bound = control_bound
         g = torch.Generator().manual_seed(seed)
         self.u = [torch.randn(layer.weight.shape[0], generator=g) for layer in self.layers]
-        project_lipschitz(net, layer_bound)
+        project_lipschitz(net, layer_bound, control_bound)
         for _ in range(20):
             self.step()
 
@@ -65,9 +110,11 @@ class LipschitzProjector:
             sigma = torch.dot(u, w @ v)
             if sigma > self.bound * 0.999:
                 w.mul_(self.bound * 0.999 / sigma)
+        # a 25 x 4 block: the exact norm costs little
+        project_control_columns(self.layers[0].weight, self.control_bound)
 
     def finish(self, net: torch.nn.Sequential) -> None:
-        project_lipschitz(net, self.bound)
+        project_lipschitz(net, self.bound, self.control_bound)
 
 
 def spectral_norms(weights: list[np.ndarray]) -> list[float]:

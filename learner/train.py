@@ -26,10 +26,13 @@ from tqdm import tqdm
 from learner.dataset import FEATURES, TARGETS, Dataset
 from learner.model import GroundEffectNet, Normaliser, save_model
 from learner.network import (
+    CONTROL_COLUMNS,
+    DEFAULT_CONTROL_GAIN_BOUND,
     DEFAULT_LAYER_BOUND,
     LAYERS,
     LipschitzProjector,
     build_network,
+    control_column_bound,
     export_weights,
     import_weights,
     spectral_norms,
@@ -50,6 +53,12 @@ class TrainConfig:
     validation_fraction: float = param(0.2, lo=0.0, hi=0.9, lo_open=True, doc="held out")
     layer_bound: float = param(
         DEFAULT_LAYER_BOUND, lo=0.0, hi=100.0, lo_open=True, doc="spectral norm bound of each layer"
+    )
+    control_gain_bound: float = param(
+        DEFAULT_CONTROL_GAIN_BOUND,
+        lo=0.0,
+        hi=100.0,
+        doc="bound on |d f_ge / d thrust| near hover, N/N (0: none; learner.network)",
     )
     seed: int = param(0, lo=0, hi=2**31 - 1, doc="split, initialisation and batch order")
 
@@ -96,8 +105,9 @@ def train(
     ys = torch.as_tensor((y - norm.y_mean) / norm.y_std, dtype=torch.float32)
     x_train, y_train, x_val, y_val = xs[train_idx], ys[train_idx], xs[val_idx], ys[val_idx]
 
+    control_bound = _control_bound(config, norm, datasets)
     net = build_network(LAYERS, config.seed)
-    projector = LipschitzProjector(net, config.layer_bound, config.seed)
+    projector = LipschitzProjector(net, config.layer_bound, config.seed, control_bound)
     # fused: one kernel per step instead of several per tensor (a third faster here)
     optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate, fused=True)
     loss_fn = torch.nn.MSELoss()
@@ -148,6 +158,7 @@ def train(
         "train_mse_standardised": float(train_curve[best[2]]),
         "layer_spectral_norms": norms,
         "lipschitz_bound": float(np.prod(norms)),
+        "control_column_norm": float(np.linalg.norm(weights[0][:, list(CONTROL_COLUMNS)], 2)),
         "wall_s": time.perf_counter() - t0,
         "config": asdict(config),
     }
@@ -155,6 +166,8 @@ def train(
         "layers": list(LAYERS),
         "layer_bound": config.layer_bound,
         "lipschitz_bound": config.layer_bound ** (len(LAYERS) - 1),
+        "control_gain_bound": config.control_gain_bound or None,
+        "control_column_bound": control_bound,
         "training": {
             **metrics,
             "sources": sources or [],
@@ -166,6 +179,28 @@ def train(
     rmse = np.sqrt(np.mean((val_pred - y[val_idx]) ** 2, axis=0))
     metrics["validation_rmse_n"] = {t: float(v) for t, v in zip(TARGETS, rmse, strict=True)}
     return TrainResult(net_np, train_curve, val_curve, metrics)
+
+
+def _control_bound(config: TrainConfig, norm: Normaliser, datasets: list[Dataset]) -> float | None:
+    """The rotor-speed columns' bound for this data's vehicle and standardisation."""
+    if config.control_gain_bound == 0.0:
+        return None
+    vehicle = datasets[0].meta.get("vehicle") or {}
+    if "thrust_coefficient_n_s2" not in vehicle or "mass_kg" not in vehicle:
+        from simbridge.vehicle import load_vehicle
+
+        v = load_vehicle("nano")
+        vehicle = {"thrust_coefficient_n_s2": v.thrust_coefficient_n_s2, "mass_kg": v.mass_kg}
+    c_t = float(vehicle["thrust_coefficient_n_s2"])
+    hover_rad_s = float(np.sqrt(float(vehicle["mass_kg"]) * 9.81 / (4.0 * c_t)))
+    return control_column_bound(
+        config.control_gain_bound,
+        norm.x_std[list(CONTROL_COLUMNS)],
+        float(norm.y_std[2]),
+        c_t,
+        hover_rad_s,
+        config.layer_bound,
+    )
 
 
 def write_outputs(result: TrainResult, out: Path) -> dict[str, Path]:

@@ -7,6 +7,7 @@ import math
 import sys
 from pathlib import Path
 
+from learner.bounds import DEFAULT_CONTROL_GAIN_BOUND, DEFAULT_LAYER_BOUND
 from learner.online.names import METHODS
 from mission import commands, gap_cli
 from mission.experiments.cli import add_experiment_parser
@@ -280,7 +281,19 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("data", type=Path, nargs="+", help="dataset files")
     t.add_argument("--out", type=Path, required=True, help="model file (.npz)")
     t.add_argument("--max-epochs", type=int, default=1000)
-    t.add_argument("--layer-bound", type=float, default=2.0, help="spectral norm bound per layer")
+    t.add_argument(
+        "--layer-bound",
+        type=float,
+        default=DEFAULT_LAYER_BOUND,
+        help=f"spectral norm bound per layer (default: {DEFAULT_LAYER_BOUND:g})",
+    )
+    t.add_argument(
+        "--control-gain-bound",
+        type=float,
+        default=DEFAULT_CONTROL_GAIN_BOUND,
+        help="bound on |d f_ge / d thrust| near hover, N/N, through the rotor-speed inputs "
+        f"(Neural Lander's stability condition; 0: none; default: {DEFAULT_CONTROL_GAIN_BOUND:g})",
+    )
     t.add_argument("--seed", type=int, default=0)
     t.set_defaults(func=commands.cmd_learn)
     e = learn.add_parser("evaluate", help="none, analytic and neural over seeded landing trials")

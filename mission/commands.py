@@ -270,7 +270,10 @@ def cmd_learn(args: argparse.Namespace) -> int:
 
         datasets = [load_dataset(p) for p in args.data]
         config = TrainConfig(
-            max_epochs=args.max_epochs, seed=args.seed, layer_bound=args.layer_bound
+            max_epochs=args.max_epochs,
+            seed=args.seed,
+            layer_bound=args.layer_bound,
+            control_gain_bound=args.control_gain_bound,
         )
         result = train(datasets, config, sources=[str(p) for p in args.data])
         paths = write_outputs(result, args.out)
@@ -279,7 +282,7 @@ def cmd_learn(args: argparse.Namespace) -> int:
             f"trained on {m['train_samples']} samples ({m['outliers_dropped']} outliers dropped) "
             f"in {m['wall_s']:.1f} s, {m['epochs']} epochs; validation RMSE f_ge,z "
             f"{m['validation_rmse_n']['fge_z'] * 1000:.2f} mN; Lipschitz bound "
-            f"{m['lipschitz_bound']:.2f}"
+            f"{m['lipschitz_bound']:.2f}; rotor-speed columns {m['control_column_norm']:.4f}"
         )
         for kind, path in paths.items():
             print(f"{kind}: {path}")

@@ -96,6 +96,9 @@ def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) ->
     e.add_argument("--hold-s", type=float, default=10.0, help="hold 3 cm above ground this long")
     e.add_argument("--no-remember", action="store_true", help="skip experiment 4.4")
     e.add_argument(
+        "--workers", type=int, default=None, help="flights at once (default: one per core)"
+    )
+    e.add_argument(
         "--param", action="append", default=[], metavar="NAME=VALUE", help="e.g. GFX_OL_LR=0.01"
     )
     e.add_argument("--json", action="store_true")
@@ -114,6 +117,7 @@ def cmd_online_learn(args: argparse.Namespace) -> int:
         print(save_memory(args.out, memory))
         return 0
     import json
+    import os
 
     from mission.online_eval import run_online_eval
 
@@ -131,6 +135,9 @@ def cmd_online_learn(args: argparse.Namespace) -> int:
         raise ConfigError(f"--rho: each rho must be in (0, 50], got {args.rho!r}")
     if args.trials < 1:
         raise ConfigError(f"--trials: {args.trials} must be at least 1")
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    if not 1 <= workers <= 64:
+        raise ConfigError(f"--workers: {workers} is outside the allowed range [1, 64]")
     if not 1.0 <= args.hold_s <= 120.0:
         raise ConfigError(f"--hold-s: {args.hold_s:g} is outside the allowed range [1, 120] s")
     result = run_online_eval(
@@ -141,6 +148,7 @@ def cmd_online_learn(args: argparse.Namespace) -> int:
         args.hold_s,
         remember=not args.no_remember,
         params=tuple(args.param),
+        workers=workers,
     )
     if args.json:
         print(json.dumps(result))

@@ -17,7 +17,8 @@ expert) and each online method (deterministic updates, so a trial is reproducibl
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,7 @@ from mission.trials import landing_trial
 from simbridge.world import resolve_world_path
 
 DEFAULT_HOLD_S = 10.0
+MAX_FLIGHT_S = 240.0  # a trial lasts 30-80 s simulated; one that floats longer has failed
 
 
 def trial_file(directory: Path, seed: int, hold_s: float) -> tuple[Path, str]:
@@ -60,6 +62,7 @@ def hold_error(
         network=network,
         via_gcs=False,
         record=False,
+        max_flight_s=MAX_FLIGHT_S,
         autopilot_options=extra,
     )
     error = summary.get("hold_z_rms_error_m")
@@ -76,10 +79,17 @@ def run_online_eval(
     remember: bool = True,
     params: tuple[str, ...] = (),
     say: Callable[[str], None] = print,
+    workers: int = 1,
 ) -> dict[str, Any]:
     results: dict[str, Any] = {"seeds": seeds, "hold_s": hold_s, "network": network}
     extra = tuple(a for p in params for a in ("--param", p))
-    with tempfile.TemporaryDirectory() as tmp:
+    # each flight is its own simulator and autopilot processes: threads only wait on them
+    pool = ThreadPoolExecutor(max_workers=workers)
+
+    def errors_of(calls: Sequence[tuple[Any, ...]]) -> np.ndarray:
+        return np.array(list(pool.map(lambda c: hold_error(*c), calls)))
+
+    with pool, tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         trials = [trial_file(d, seed, hold_s) for seed in seeds]
         adapted: dict[str, list[Path]] = {m: [] for m in methods}
@@ -89,7 +99,7 @@ def run_online_eval(
             conditions = [("offline", "neural", ()), ("analytic", "analytic", ())]
             conditions += [(m, "neural", ("--online", m, *extra)) for m in methods]
             for name, model, options in conditions:
-                values = []
+                calls = []
                 for (mission, start), seed in zip(trials, seeds, strict=True):
                     save: tuple[str, ...] = ()
                     if remember and rho == 2.0 and name in methods:
@@ -97,10 +107,8 @@ def run_online_eval(
                         adapted[name].append(path)
                         save = ("--save-model", str(path))
                     net = None if model == "analytic" else network
-                    values.append(
-                        hold_error(mission, start, world, model, rho, net, *options, *save)
-                    )
-                errors[name] = np.array(values)
+                    calls.append((mission, start, world, model, rho, net, *options, *save))
+                errors[name] = errors_of(calls)
                 _say_row(say, f"rho_sim {rho:g}", name, errors[name])
             gaps = {
                 m: gap_closed(errors["offline"], errors["analytic"], errors[m]) for m in methods
@@ -114,28 +122,28 @@ def run_online_eval(
                 "gap_closed": gaps,
             }
         if remember and 2.0 in rhos:
-            results["remember"] = _remember(d, trials, seeds, methods, network, adapted, say)
+            results["remember"] = _remember(d, trials, methods, network, adapted, say, errors_of)
     return results
 
 
 def _remember(
     d: Path,
     trials: list[tuple[Path, str]],
-    seeds: list[int],
     methods: tuple[str, ...],
     network: str,
     adapted: dict[str, list[Path]],
     say: Callable[[str], None],
+    errors_of: Callable[[Sequence[tuple[Any, ...]]], np.ndarray],
 ) -> dict[str, Any]:
     """4.4: back at rho = 1 with the networks adapted at rho = 2, learning off."""
     world = world_file(d, 1.0)
-    offline = np.array([hold_error(m, s, world, "neural", 1.0, network) for m, s in trials])
+    offline = errors_of([(m, s, world, "neural", 1.0, network) for m, s in trials])
     _say_row(say, "rho_sim 1 again", "offline", offline)
     out: dict[str, Any] = {"offline_m": offline.tolist(), "forgetting_m": {}}
     for method in methods:
-        errors = np.array(
+        errors = errors_of(
             [
-                hold_error(m, s, world, "neural", 1.0, str(path))
+                (m, s, world, "neural", 1.0, str(path))
                 for (m, s), path in zip(trials, adapted[method], strict=True)
             ]
         )

@@ -129,9 +129,7 @@ def test_bad_arguments_name_the_option() -> None:
         assert done.returncode == 2 and words in done.stderr, done.stderr
 
 
-TINY = [
-    Trial("t", "analytic", seed, (Flight(world="rho2", model="analytic"),)) for seed in (0, 1)
-]
+TINY = [Trial("t", "analytic", seed, (Flight(world="rho2", model="analytic"),)) for seed in (0, 1)]
 
 
 def _deterministic(record: dict) -> tuple:

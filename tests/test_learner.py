@@ -10,7 +10,12 @@ import torch
 
 from learner.dataset import COLUMNS, FEATURES, load_dataset, save_dataset
 from learner.model import load_model
-from learner.network import build_network, import_weights
+from learner.network import (
+    DEFAULT_CONTROL_GAIN_BOUND,
+    DEFAULT_LAYER_BOUND,
+    build_network,
+    import_weights,
+)
 from learner.plots import near_ground_error
 from mission.trials import evaluate_models
 from simbridge.config import ConfigError
@@ -83,7 +88,27 @@ def test_shipped_models_keep_their_lipschitz_bound(name):
         np.prod([np.linalg.norm(w, ord=2) for w in net.weights])
         <= net.header["lipschitz_bound"] + 1e-6
     )
-    assert net.header["lipschitz_bound"] == 16.0
+    assert net.header["lipschitz_bound"] == DEFAULT_LAYER_BOUND**4
+
+
+@pytest.mark.parametrize("name", ["rho1", "rho2"])
+def test_shipped_models_cannot_explain_the_effect_by_the_thrust(name):
+    """Neural Lander's condition for the controller's fixed point: d f_z / d thrust stays
+    within the bound at every height, so the network cannot learn f_z = m g - thrust."""
+    net = load_model(name)
+    vehicle = load_vehicle("nano")
+    c_t = vehicle.thrust_coefficient_n_s2
+    bound = net.header["control_gain_bound"]
+    assert bound == {"rho1": DEFAULT_CONTROL_GAIN_BOUND, "rho2": 1.0}[name]  # README
+    slopes = []
+    for z in (0.015, 0.02, 0.03, 0.05, 0.1, 0.5):
+        thrust = np.linspace(0.25, 0.65, 9)
+        n = np.sqrt(thrust / (4 * c_t))
+        rows = np.zeros((len(n), 12))
+        rows[:, 0], rows[:, 4], rows[:, 8:] = z, 1.0, n[:, None]
+        f = net.predict_batch(rows)[:, 2]
+        slopes.extend(np.diff(f) / np.diff(thrust))
+    assert max(abs(s) for s in slopes) <= bound
 
 
 @pytest.mark.parametrize(("name", "rho"), [("rho1", 1.0), ("rho2", 2.0)])

