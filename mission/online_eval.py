@@ -33,6 +33,7 @@ from mission.trials import landing_trial
 from simbridge.world import resolve_world_path
 
 DEFAULT_HOLD_S = 10.0
+SAME_M = 1e-5  # 0.01 mm: hold errors closer than this are the same
 MAX_FLIGHT_S = 240.0  # a trial lasts 30-80 s simulated; one that floats longer has failed
 
 
@@ -155,7 +156,10 @@ def _remember(
         + ", ".join(f"{m} {v * 1000:+.2f} mm" for m, v in forgot.items())
     )
     if "naive" in forgot:
-        better = [m for m in PROTECTING if m in forgot and forgot[m] < forgot["naive"]]
+        # by more than a rounding: equal networks (all sat down) are not "less"
+        better = [
+            m for m in PROTECTING if m in forgot and forgot[m] < forgot["naive"] - SAME_M
+        ]
         say(f"protecting methods that forget less than naive: {', '.join(better) or 'none'}")
     return out
 

@@ -23,6 +23,7 @@ RESULTS_FILE = "results.jsonl"
 # The network of experiment 4.2, trained once per campaign: small data, capped epochs.
 MULTI_SAMPLES_PER_RHO = 6000
 MULTI_MAX_EPOCHS = 150
+MULTI_CONTROL_GAIN_BOUND = 1.0
 
 
 def load_results(path: Path) -> dict[str, dict[str, Any]]:
@@ -84,7 +85,9 @@ def train_multi_network(folder: Path, say: Callable[[str], None] = print) -> Pat
         if not path.exists():
             gather(rho, MULTI_SAMPLES_PER_RHO, 100 + i, path, progress=False)
         data.append(load_dataset(path))
-    result = train(data, TrainConfig(max_epochs=MULTI_MAX_EPOCHS), progress=False)
+    # rho 2's data: the bound the shipped rho2 network was trained with (README)
+    config = TrainConfig(max_epochs=MULTI_MAX_EPOCHS, control_gain_bound=MULTI_CONTROL_GAIN_BOUND)
+    result = train(data, config, progress=False)
     write_outputs(result, model)
     say(
         f"trained the rho {' + '.join(f'{r:g}' for r in MULTI_RHOS)} network in "
@@ -144,6 +147,11 @@ def _ray_results(
             ray.cancel(ref, force=True)
 
 
+def _shared(record: dict[str, Any], trial: Trial) -> dict[str, Any]:
+    """`record`'s flight as the result of `trial` (the same seeded flight, another trial)."""
+    return {**record, "id": trial.id, "trial": trial.to_dict(), "same_flight_as": record["id"]}
+
+
 def run_trials(
     trials: list[Trial],
     out: Path,
@@ -157,7 +165,19 @@ def run_trials(
     out.mkdir(parents=True, exist_ok=True)
     path = out / RESULTS_FILE
     done = load_results(path)
-    todo = [t for t in trials if t.id not in done]
+    # identical seeded flights of different experiments fly once (the lockstep path is
+    # reproducible to the bit); each trial still gets its own record
+    flown = {r["id"].split("/", 2)[2]: r for r in done.values()}
+    sharing: dict[str, list[Trial]] = {}
+    for t in trials:
+        if t.id in done:
+            continue
+        if t.flight_key in flown:
+            done[t.id] = _shared(flown[t.flight_key], t)
+            append_result(path, done[t.id])
+        else:
+            sharing.setdefault(t.flight_key, []).append(t)
+    todo = [group[0] for group in sharing.values()]
     recordings = out / "recordings" if keep_recordings else None
     workers = workers or os.cpu_count() or 1
     if ray_address is not None:
@@ -167,7 +187,7 @@ def run_trials(
         stream = _pool_results(todo, artefacts, recordings, workers)
     bar = tqdm(
         total=len(trials),
-        initial=len(trials) - len(todo),
+        initial=len(trials) - sum(len(group) for group in sharing.values()),
         unit="trial",
         desc="experiment",
         disable=not progress,
@@ -175,13 +195,16 @@ def run_trials(
     failed = 0
     try:
         for record in stream:
-            append_result(path, record)
-            if "error" in record:
-                failed += 1
-                tqdm.write(f"trial {record['id']} failed: {record['error']}")
-            else:
-                done[record["id"]] = record
-            bar.update(1)
+            group = sharing[record["id"].split("/", 2)[2]]
+            for k, trial in enumerate(group):
+                shared = record if k == 0 else _shared(record, trial)
+                append_result(path, shared)
+                if "error" in shared:
+                    failed += 1
+                    tqdm.write(f"trial {shared['id']} failed: {shared['error']}")
+                else:
+                    done[shared["id"]] = shared
+                bar.update(1)
             bar.set_postfix(failed=failed)
     finally:
         bar.close()

@@ -96,11 +96,18 @@ class Trial:
     def id(self) -> str:
         """Experiment, condition, seed and a digest of the flights and their missions: a
         changed definition is a new trial, never confused with an old result."""
+        return f"{self.experiment}/{self.condition}/{self.flight_key}"
+
+    @property
+    def flight_key(self) -> str:
+        """Seed and digest alone: trials of different experiments with the same key fly
+        the very same seeded flights (e.g. the rho1 network at rho 1 in 4.2, 4.3, 4.4 and
+        4.7), so one flight serves them all."""
         missions = [make_mission(f.mission, self.seed) for f in self.flights]
         flights = [dataclasses.asdict(f) for f in self.flights]
         spec = json.dumps([flights, missions], sort_keys=True)
         digest = hashlib.sha256(spec.encode()).hexdigest()[:8]
-        return f"{self.experiment}/{self.condition}/{self.seed}/{digest}"
+        return f"{self.seed}/{digest}"
 
     def to_dict(self) -> dict:
         return {
