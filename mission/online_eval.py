@@ -157,9 +157,7 @@ def _remember(
     )
     if "naive" in forgot:
         # by more than a rounding: equal networks (all sat down) are not "less"
-        better = [
-            m for m in PROTECTING if m in forgot and forgot[m] < forgot["naive"] - SAME_M
-        ]
+        better = [m for m in PROTECTING if m in forgot and forgot[m] < forgot["naive"] - SAME_M]
         say(f"protecting methods that forget less than naive: {', '.join(better) or 'none'}")
     return out
 

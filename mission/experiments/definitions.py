@@ -148,7 +148,7 @@ def _offline_vs_baseline() -> Experiment:
         (
             _c("none", "no model", BASELINE_TRIALS, dataclasses.replace(w, model="none")),
             _c("analytic", "analytic (true rho)", 4, dataclasses.replace(w, model="analytic")),
-            _c("neural", "neural rho2 (offline)", 5, dataclasses.replace(w, network="rho2")),
+            _c("neural", "neural rho2 (offline)", 4, dataclasses.replace(w, network="rho2")),
         ),
         (
             Expectation("neural", "none", "lower", "the offline network beats the baseline"),
@@ -164,9 +164,9 @@ def _several_rho() -> Experiment:
         g = f"rho_sim {rho:g}"
         f = Flight(rho_sim=rho)
         conditions += [
-            _c(f"multi@{rho:g}", f"rho 1+2 net at {rho:g} ({seen})", 3,
+            _c(f"multi@{rho:g}", f"rho 1+2 net at {rho:g} ({seen})", 2,
                dataclasses.replace(f, network=MULTI_NETWORK), group=g),
-            _c(f"single@{rho:g}", f"{NEAREST[rho]} net at {rho:g}", 3,
+            _c(f"single@{rho:g}", f"{NEAREST[rho]} net at {rho:g}", 2,
                dataclasses.replace(f, network=NEAREST[rho]), group=g),
         ]  # fmt: skip
     return Experiment(
