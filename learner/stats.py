@@ -18,8 +18,20 @@ def mean_ci95(values: np.ndarray) -> tuple[float, float, float]:
 
 
 def welch(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """(t statistic, two-sided p-value) of Welch's unequal-variance t-test."""
-    result = stats.ttest_ind(np.asarray(a, float), np.asarray(b, float), equal_var=False)
+    """(t statistic, two-sided p-value) of Welch's unequal-variance t-test.
+
+    Two samples that agree to rounding are the same (t 0, p 1): without spread, the test
+    would divide a rounding difference by zero and call it certain (two conditions that
+    both sat the vehicle down, 16.99 mm each, came out p = 0)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    scale = max(float(np.max(np.abs(a))), float(np.max(np.abs(b))), 1e-300)
+    if (
+        np.ptp(a) <= 1e-12 * scale
+        and np.ptp(b) <= 1e-12 * scale
+        and abs(float(np.mean(a) - np.mean(b))) <= 1e-12 * scale
+    ):
+        return 0.0, 1.0
+    result = stats.ttest_ind(a, b, equal_var=False)
     return float(result.statistic), float(result.pvalue)
 
 

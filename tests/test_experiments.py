@@ -86,6 +86,9 @@ def test_hedges_g_welch_and_verdicts() -> None:
     # deterministic conditions without spread: equal or not, never a nan verdict
     same = compare(np.array([2.0, 2.0]), np.array([2.0, 2.0]))
     assert same["p"] == 1.0 and verdict("similar", same) == "supported"
+    # ... and two that agree to rounding (both sat down: 16.99 mm) are not "lower" at p = 0
+    sat = compare(np.array([0.01699, 0.01699]), np.array([0.01699 + 1e-17, 0.01699]))
+    assert sat["p"] == 1.0 and verdict("lower", sat) == "not shown"
     assert verdict("lower", compare(np.array([1.0, 1.0]), np.array([2.0, 2.0]))) == "supported"
     assert verdict("lower", compare(np.array([1.0]), np.array([2.0]))) == "not shown"
 
