@@ -10,6 +10,8 @@ import numpy as np
 # (judged by the setpoint, so that a vehicle the ground effect keeps higher still counts);
 # their error is taken over the second half of each hold, once the approach has settled.
 NEAR_GROUND_M = 0.1
+# 10 rotor radii: the ground effect there is about 0.3 mN x rho in hover (0.6 mN at rho 2)
+FAR_FROM_GROUND_M = 0.5
 COLUMNS = ("time_s", "x", "y", "z", "vx", "vy", "vz", "zd", "height", "mode")
 
 
@@ -59,6 +61,21 @@ def flight_metrics(
     else:
         out["landing_error_m"] = None
     return out
+
+
+def ge_error_metrics(pairs: np.ndarray) -> dict[str, float | None]:
+    """How well the controller's ground-effect model knew the vertical force in flight: RMS
+    of predicted minus true (the simulator's) over the airborne steps, and over those at least
+    FAR_FROM_GROUND_M up, where the ground effect of rho 1 and rho 2 is under a millinewton: an
+    error there is not the world but the model (a network that forgot what it knew)."""
+    if len(pairs) == 0:
+        return {"ge_z_rms_error_n": None, "ge_z_far_rms_error_n": None}
+    error = pairs[:, 1] - pairs[:, 2]
+    far = pairs[:, 0] >= FAR_FROM_GROUND_M
+    return {
+        "ge_z_rms_error_n": float(np.sqrt(np.mean(error**2))),
+        "ge_z_far_rms_error_n": float(np.sqrt(np.mean(error[far] ** 2))) if far.any() else None,
+    }
 
 
 def settled_halves(mask: np.ndarray) -> np.ndarray:

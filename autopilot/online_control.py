@@ -19,7 +19,7 @@ import numpy as np
 from autopilot.ground_models import GroundEffectModel, default_network
 from autopilot.params import ONLINE_METHODS, ParamStore
 from learner.dataset import COLUMNS, FEATURES, TARGETS
-from learner.online.memory import Memory, load_memory, memory_path_for
+from learner.online.memory import Memory, load_memory, memory_path_for, offline_path_for
 from learner.online.names import NEEDS_MEMORY
 from simbridge.config import ConfigError
 
@@ -69,6 +69,22 @@ def find_memory(network: str | Path | None, rho: float) -> Memory | None:
     return load_memory(path) if path.exists() else None
 
 
+def find_offline(network: str | Path | None, rho: float, net: Any) -> Any:
+    """The offline weights an adapted model came from (NAME.offline.npz beside it), or None
+    for a model trained offline (it is its own anchor)."""
+    from learner.model import load_model, resolve_model_path
+
+    if "online" not in net.header:
+        return None
+    path = offline_path_for(resolve_model_path(network or default_network(rho)))
+    if not path.exists():
+        raise ConfigError(
+            f"{path.name} is missing: an adapted model needs the offline weights it came from "
+            "beside it (written by --save-model)"
+        )
+    return load_model(path)
+
+
 class OnlineControl:
     def __init__(
         self, options: OnlineOptions, params: ParamStore, network: str | Path | None
@@ -104,15 +120,17 @@ class OnlineControl:
             if self.learner is None:
                 from autopilot.online_learner import OnlineLearner
 
-                memory = find_memory(self.network, self.params.model()[1])
+                rho = self.params.model()[1]
+                net = model.net  # type: ignore[attr-defined]
                 self.learner = OnlineLearner(
-                    model.net,  # type: ignore[attr-defined]
+                    net,
                     settings,
-                    memory,
+                    find_memory(self.network, rho),
                     self.options.deterministic,
                     self.options.on_report,
+                    offline=find_offline(self.network, rho, net),
                 )
-            elif settings != self.learner.session.settings:
+            elif settings != self.learner.settings:
                 self.learner.configure(settings)
         except ConfigError as err:  # e.g. ewc asked for in flight without a memory
             self.errors.append(str(err))
@@ -122,6 +140,12 @@ class OnlineControl:
         if p.reset:
             self.learner.reset(t_s)
             self.params.set("GFX_OL_RESET", 0.0)
+
+    def wait_ready(self) -> None:
+        """Before the flight (never in it): until the learner process is up, so that a fast
+        lockstep flight does not pass while it imports torch."""
+        if self.learner is not None and not self.learner.wait_ready():
+            self.errors.append("the learner process was not up within a minute of the start")
 
     def submit(self, row: tuple[float, ...]) -> None:
         if self.active and self.learner is not None:

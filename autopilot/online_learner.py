@@ -1,17 +1,23 @@
-"""The online learner's host in the autopilot: a thread, a bounded queue, the current snapshot.
+"""The online learner's host in the autopilot: a bounded queue, a thread, the current snapshot.
 
 The control loop calls `submit` (never blocks: a full queue drops the sample and counts it)
-and reads `snapshot` (one reference, replaced whole by the learner). In deterministic mode
-there is no thread: the update runs inside `submit` when a batch completes, so updates
-happen at the same simulated times on every run (lockstep makes that free of drift).
-Pause, reset and new settings travel to the thread through a command deque, never a lock
-the control loop could wait on.
+and reads `snapshot` (one reference, replaced whole by the learner thread).
+
+Asynchronous (the default with a ground station): samples go, in chunks of CHUNK_SAMPLES,
+down a pipe to the learner process (autopilot/learner_process.py), which runs the update
+on the other core; the queue is the pipe, bounded by the samples sent and not yet taken
+off it. The learner thread here waits on the pipe for new weights and publishes each as
+an immutable snapshot by one reference assignment; it holds the interpreter only for that.
+
+Deterministic (lockstep tests and trials): no process and no thread; the update runs
+inside `submit` when a batch completes, so updates happen at the same simulated times on
+every run. Pause, reset and new settings reach the learner in order with the samples.
 """
 
 from __future__ import annotations
 
-import collections
-import queue
+import contextlib
+import multiprocessing
 import shutil
 import threading
 from collections.abc import Callable
@@ -21,13 +27,16 @@ from typing import Any
 
 import numpy as np
 
+from autopilot.learner_process import ROW_WIDTH, learner_main
 from learner.model import GroundEffectNet, save_model
 from learner.online.memory import Memory
-from learner.online.session import OnlineSession
+from learner.online.session import OnlineSession, adapted_header
 from learner.online.settings import OnlineSettings
-from learner.online.snapshot import Snapshot
+from learner.online.snapshot import Snapshot, make_snapshot
 
 QUEUE_SIZE = 512  # samples: 5 s of slack before dropping
+CHUNK_SAMPLES = 16  # one message per 0.16 s of samples: the pipe, not the loop, carries them
+READY_TIMEOUT_S = 60.0  # the learner process imports torch: about 2 s, far more under load
 Report = Callable[[float, float | None, int], None]  # (sim time, loss, version)
 
 
@@ -40,28 +49,48 @@ class OnlineLearner:
         deterministic: bool = True,
         on_report: Report | None = None,
         queue_size: int = QUEUE_SIZE,
+        offline: GroundEffectNet | None = None,
     ) -> None:
-        if deterministic:
-            import torch
-
-            torch.set_num_threads(1)  # the update runs in the control thread: one core
-        self.session = OnlineSession(base, settings, memory)
+        self.base = base
+        self.offline = offline if offline is not None else base
+        self.settings = settings
+        self.memory = memory
         self.deterministic = deterministic
         self.on_report = on_report
-        self.snapshot: Snapshot = self.session.snapshot  # what the controller reads
+        self.snapshot: Snapshot = Snapshot(0, base, 0.0)  # what the controller reads
         self.paused = False
         self.dropped = 0
         self.ignored_paused = 0
         self.errors: list[str] = []
         self.losses: list[tuple[float, float, int]] = []  # (t, loss, version) per update
-        self._queue: queue.Queue[tuple[np.ndarray, np.ndarray, float] | None] = queue.Queue(
-            maxsize=queue_size
+        self.session: OnlineSession | None = None
+        if deterministic:
+            import torch
+
+            torch.set_num_threads(1)  # the update runs in the control thread: one core
+            self.session = OnlineSession(base, settings, memory, offline)
+            self.session.warm_up()  # not in the first update of the flight
+            return
+        self._queue_size = queue_size
+        self._chunk_samples = max(1, min(CHUNK_SAMPLES, queue_size))
+        self._chunk = np.empty((self._chunk_samples, ROW_WIDTH))
+        self._filled = 0
+        context = multiprocessing.get_context("spawn")
+        self._sent = 0  # samples down the pipe ...
+        self._taken = context.RawValue("q", 0)  # ... and taken off it (the learner counts)
+        self._final: tuple[dict[str, int], dict[str, int], float | None] | None = None
+        self._ready = threading.Event()
+        self._conn, child = multiprocessing.Pipe(duplex=True)  # a socket pair: 200 kB buffer
+        self._process = context.Process(
+            target=learner_main,
+            args=(child, self._taken, base, settings, memory, offline),
+            name="groundfx-learner",
+            daemon=True,
         )
-        self._commands: collections.deque[tuple[str, Any]] = collections.deque()
-        self._thread: threading.Thread | None = None
-        if not deterministic:
-            self._thread = threading.Thread(target=self._run, name="online-learner", daemon=True)
-            self._thread.start()
+        self._process.start()
+        child.close()
+        self._thread = threading.Thread(target=self._run, name="online-learner", daemon=True)
+        self._thread.start()
 
     # --- the control loop's side: never waits ---------------------------------------------
 
@@ -69,59 +98,108 @@ class OnlineLearner:
         if self.paused:
             self.ignored_paused += 1
             return
-        if self.deterministic:
+        if self.session is not None:
             self._learn(features, target_n, t_s)
             return
+        row = self._chunk[self._filled]
+        row[0] = t_s
+        row[1:13] = features
+        row[13:16] = target_n
+        self._filled += 1
+        if self._filled == self._chunk_samples:
+            self._flush()
+
+    def _flush(self) -> None:
+        n, self._filled = self._filled, 0
+        if n == 0:
+            return
+        if self._sent - self._taken.value + n > self._queue_size or self._final is not None:
+            self.dropped += n  # the learner is behind (or gone): drop, never wait
+            return
         try:
-            self._queue.put_nowait((features, target_n, t_s))
-        except queue.Full:
-            self.dropped += 1
+            self._conn.send(("samples", self._chunk[:n].copy()))
+        except OSError:  # the learner process died: its thread reports it; count the loss
+            self.dropped += n
+            return
+        self._sent += n
+
+    def wait_ready(self, timeout_s: float = READY_TIMEOUT_S) -> bool:
+        """Before the flight: wait until the learner process is up (in flight, never)."""
+        return self.session is not None or self._ready.wait(timeout_s)
 
     def pause(self, paused: bool) -> None:
         self.paused = paused
 
     def reset(self, t_s: float) -> None:
         """Back to the offline weights."""
-        if self.deterministic:
+        if self.session is not None:
             self._publish(self.session.reset(t_s))
         else:
-            self._commands.append(("reset", t_s))
+            self._command("reset", t_s)
 
     def configure(self, settings: OnlineSettings) -> None:
-        if self.deterministic:
+        self.settings = settings
+        if self.session is not None:
             self.session.configure(settings)
         else:
-            self._commands.append(("configure", settings))
+            self._command("configure", settings)
+
+    def _command(self, kind: str, value: Any) -> None:
+        self._flush()  # the samples before the command are learnt before it
+        if self._final is None:
+            with contextlib.suppress(OSError):  # a dead learner: its thread reports it
+                self._conn.send((kind, value))
 
     def close(self) -> None:
-        """Stop the thread after the samples already queued (deterministic: nothing to do)."""
-        if self._thread is not None:
-            self._queue.put(None)
-            self._thread.join(timeout=30.0)
-            self._thread = None
+        """Let the learner finish the samples already sent, then stop it."""
+        if self.session is not None or not hasattr(self, "_process"):
+            return
+        self._command("close", None)
+        self._thread.join(timeout=60.0)
+        self._process.join(timeout=10.0)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join()
+        self._conn.close()
 
-    # --- the learner's side ----------------------------------------------------------------
+    # --- the learner thread: the pipe in, snapshots out ------------------------------------
 
     def _run(self) -> None:
-        import torch
-
-        torch.set_num_threads(1)  # one core: the other belongs to the control loop
         while True:
-            item = self._queue.get()
-            while self._commands:
-                kind, value = self._commands.popleft()
-                try:
-                    if kind == "reset":
-                        self._publish(self.session.reset(value))
-                    else:
-                        self.session.configure(value)
-                except Exception as err:  # a bad setting must not kill the thread
-                    self.errors.append(f"{kind}: {err}")
-            if item is None:
+            try:
+                message = self._conn.recv()
+            except (EOFError, OSError):
+                if self._final is None:
+                    code = self._process.exitcode
+                    self.errors.append(f"the learner process ended unexpectedly (exit {code})")
+                    self._final = ({}, {}, None)
+                self._ready.set()
                 return
-            self._learn(*item)
+            kind = message[0]
+            if kind == "snapshot":
+                _, version, weights, biases, t_s, loss = message
+                header = adapted_header(self.base.header, self.settings, version, {})
+                self._publish(
+                    make_snapshot(version, weights, biases, self.base.normaliser, header, t_s, loss)
+                )
+            elif kind == "rejected":
+                if self.on_report is not None:
+                    self.on_report(message[1], message[2], self.snapshot.version)
+            elif kind == "reset":
+                self._publish(Snapshot(message[1], self.offline, message[2]))
+            elif kind == "error":
+                self.errors.append(message[1])
+            elif kind == "ready":
+                self._ready.set()
+            elif kind == "summary":
+                self._final = (message[1], message[2], message[3])
+                self._ready.set()
+                return
+
+    # --- both modes ------------------------------------------------------------------------
 
     def _learn(self, features: np.ndarray, target_n: np.ndarray, t_s: float) -> None:
+        assert self.session is not None
         updates = self.session.counts["updates"]
         snapshot = self.session.add(features, target_n, t_s)
         if snapshot is not None:
@@ -138,39 +216,47 @@ class OnlineLearner:
 
     # --- the end of the flight -------------------------------------------------------------
 
+    def _counts(self) -> tuple[dict[str, int], dict[str, int], float | None]:
+        if self.session is not None:
+            s = self.session
+            return dict(s.counts), dict(s.reject_reasons), s.last_loss
+        return self._final if self._final is not None else ({}, {}, None)
+
     def summary(self) -> dict[str, Any]:
-        c = self.session.counts
+        c, reasons, last_loss = self._counts()
         return {
-            "online_method": self.session.settings.method,
+            "online_method": self.settings.method,
             "online_mode": "deterministic" if self.deterministic else "asynchronous",
             "online_version": self.snapshot.version,
-            "online_samples": c["samples"],
-            "online_updates": c["updates"],
-            "online_accepted": c["accepted"],
-            "online_rejected": c["rejected"],
-            "online_reject_reasons": dict(self.session.reject_reasons),
+            "online_samples": c.get("samples", 0),
+            "online_updates": c.get("updates", 0),
+            "online_accepted": c.get("accepted", 0),
+            "online_rejected": c.get("rejected", 0),
+            "online_reject_reasons": reasons,
             "online_dropped": self.dropped,
             "online_ignored_paused": self.ignored_paused,
-            "online_outliers": c["outliers"],
-            "online_resets": c["resets"],
+            "online_outliers": c.get("outliers", 0),
+            "online_resets": c.get("resets", 0),
             "online_loss_first": self.losses[0][1] if self.losses else None,
-            "online_loss_last": self.session.last_loss,
+            "online_loss_last": last_loss,
             "online_errors": self.errors,
-            "online_settings": asdict(self.session.settings),
+            "online_settings": asdict(self.settings),
         }
 
     def save(self, path: Path) -> Path:
-        """The current snapshot as a model file (with the base model's memory beside it, so
-        that ewc and replay can go on from it)."""
-        net = self.snapshot.net
-        out = save_model(
-            path,
-            GroundEffectNet(net.weights, net.biases, net.normaliser, self.session.adapted_header()),
-        )
-        source = self.session.memory.header.get("path") if self.session.memory else None
-        if source and Path(source).exists():
-            from learner.online.memory import memory_path_for
+        """The current snapshot as a model file, with the offline weights it came from beside
+        it (NAME.offline.npz: what the protecting methods and a reset go back to in a later
+        flight) and the base model's memory (so that ewc and replay can go on from it)."""
+        from learner.online.memory import memory_path_for, offline_path_for
 
+        net = self.snapshot.net
+        header = adapted_header(
+            self.base.header, self.settings, self.snapshot.version, self._counts()[0]
+        )
+        out = save_model(path, GroundEffectNet(net.weights, net.biases, net.normaliser, header))
+        save_model(offline_path_for(out), self.offline)
+        source = self.memory.header.get("path") if self.memory else None
+        if source and Path(source).exists():
             target = memory_path_for(out)
             if Path(source).resolve() != target.resolve():
                 shutil.copyfile(source, target)

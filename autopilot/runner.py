@@ -7,6 +7,7 @@ sensors' time is the only clock. The loop is the edge; every decision is a pure 
 from __future__ import annotations
 
 import dataclasses
+import gc
 import math
 import sys
 import time
@@ -23,7 +24,7 @@ from autopilot.controller import FlightState, control
 from autopilot.gcs_link import GcsLink
 from autopilot.ground_models import GroundEffectInputs, GroundEffectModel, make_model
 from autopilot.ground_station import GroundStation, StepInput
-from autopilot.metrics import COLUMNS, flight_metrics, trajectory_sha256
+from autopilot.metrics import COLUMNS, flight_metrics, ge_error_metrics, trajectory_sha256
 from autopilot.mission_items import MissionItem
 from autopilot.modes import FlightMode
 from autopilot.online_control import OnlineControl, OnlineOptions
@@ -226,6 +227,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     tuning = Tuning(config)
     rows: list[tuple[float, ...]] = []
     timings: list[float] = []
+    ge_pairs: list[tuple[float, float, float]] = []  # (height, predicted, true) vertical GE
     speeds = (0.0, 0.0, 0.0, 0.0)
     ge = (0.0, 0.0, 0.0)
     height: float | None = None
@@ -239,6 +241,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     online_options = dataclasses.replace(config.online, on_report=recorder.learner)
     online = OnlineControl(online_options, config.params, config.network)
     online.refresh(tuning.model, 0.0)
+    online.wait_ready()
     user_on_event = config.on_event or (lambda t, text: None)
 
     def on_event(t: float, text: str) -> None:
@@ -247,6 +250,9 @@ def fly_mission(config: AutopilotConfig) -> Flight:
 
     gcs = GcsLink(list(config.gcs_urls), config.signing)
     station = GroundStation(gcs, config.params, config.identity, config.origin, on_event)
+    # before the link: the simulator's clock runs from the connection to the first reply
+    gc.collect()
+    gc.freeze()  # what exists now (modules, models, the world) is never scanned again
     try:
         link = SimLink(config.sim_url, timeout_s=config.link_timeout_s)
     except LinkLost as lost:
@@ -329,6 +335,9 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 output = control(state, cmd.setpoint, ge, vehicle, tuning.controller)
                 speeds = output.rotor_speeds_rad_s
                 timings.append(time.perf_counter() - t0)
+                truth = step.latest.get("DEBUG_VECT")
+                if airborne and truth is not None:
+                    ge_pairs.append((height, target[2], truth["z"]))
             else:
                 speeds, ge, output = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), None
             link.send(t_us, tuple(n / n_max for n in speeds), channels, cmd.armed)
@@ -359,13 +368,14 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     except LinkLost as lost:
         ended = str(lost)
     finally:
+        # the loop's time: stopping the learner and closing links and files is not flying
+        wall = time.perf_counter() - wall0
         link.close()
         online_summary = online.close()
         station.save_signing(time.monotonic())
         gcs.close()
         # an exception on its way out (Ctrl-C, SIGTERM) ended the flight, not `ended`
         recorder.close(ended if sys.exc_info()[0] is None else "interrupted")
-    wall = time.perf_counter() - wall0
     log = np.asarray(rows, dtype=float).reshape(-1, len(COLUMNS))
     summary: dict[str, Any] = {"ended": ended, "landed": ended == "landed"}
     if len(log):
@@ -378,6 +388,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             steps=len(log),
             trajectory_sha256=trajectory_sha256(log),
         )
+    summary.update(ge_error_metrics(np.asarray(ge_pairs, dtype=float).reshape(-1, 3)))
     if timings:
         us = np.asarray(timings) * 1e6
         summary.update(

@@ -49,6 +49,12 @@ def memory_path_for(model_path: Path) -> Path:
     return model_path.with_name(model_path.stem + ".memory.npz")
 
 
+def offline_path_for(model_path: Path) -> Path:
+    """Where an adapted model keeps the offline weights it came from: `NAME.offline.npz`.
+    The protecting methods hold on to those, not to whatever the last flight left."""
+    return model_path.with_name(model_path.stem + ".offline.npz")
+
+
 def load_memory(path: Path) -> Memory:
     def read(header: dict, data: object) -> Memory:
         x = np.asarray(data["x"], dtype=np.float64)  # type: ignore[index]

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from learner.network import DEFAULT_LAYER_BOUND, project_control_columns
+from learner.network import DEFAULT_LAYER_BOUND
+from learner.online.gradient import adam, loss_and_gradient, penalty_gradient, project
 from learner.online.settings import NEEDS_MEMORY, OnlineSettings
 
 Arrays = tuple[np.ndarray, ...]
@@ -51,10 +52,6 @@ class Update:
     rls: RlsState | None = None
 
 
-def _tensors(arrays: Arrays, grad: bool) -> list[torch.Tensor]:
-    return [torch.tensor(a, dtype=torch.float64, requires_grad=grad) for a in arrays]
-
-
 def forward(ws: list[torch.Tensor], bs: list[torch.Tensor], x: torch.Tensor) -> torch.Tensor:
     h = x
     for i, (w, b) in enumerate(zip(ws, bs, strict=True)):
@@ -81,54 +78,12 @@ def mse(weights: Arrays, biases: Arrays, x: np.ndarray, y: np.ndarray) -> float:
     return float(np.mean((forward_np(weights, biases, x) - y) ** 2))
 
 
-@torch.no_grad()
-def _project(ws: list[torch.Tensor], anchor: Anchor) -> None:
-    """Every weight matrix back to spectral norm <= the model's layer bound (exact, by SVD):
-    equation 2.33; and the rotor-speed columns to their own bound."""
-    for w in ws:
-        sigma = torch.linalg.matrix_norm(w, ord=2)
-        if sigma > anchor.layer_bound:
-            w.mul_(anchor.layer_bound / sigma)
-    project_control_columns(ws[0], anchor.control_bound)
-
-
 def project_weights(weights: Arrays, bound: float) -> Arrays:
     out = []
     for w in weights:
         sigma = float(np.linalg.norm(w, ord=2))
         out.append(w * (bound / sigma) if sigma > bound else w.copy())
     return tuple(out)
-
-
-def _penalty_terms(
-    settings: OnlineSettings, anchor: Anchor
-) -> tuple[list[torch.Tensor], list[torch.Tensor] | None] | None:
-    """The anchor as tensors, once per update: offline weights and (ewc) their Fisher."""
-    if settings.method not in ("constraint", "margin", "ewc") or settings.penalty == 0.0:
-        return None
-    refs = [torch.tensor(np.array(a)) for a in (*anchor.weights, *anchor.biases)]
-    if settings.method != "ewc":
-        return refs, None
-    assert anchor.fisher_weights is not None and anchor.fisher_biases is not None
-    fisher = [torch.tensor(np.array(f)) for f in (*anchor.fisher_weights, *anchor.fisher_biases)]
-    return refs, fisher
-
-
-def _penalty(
-    params: list[torch.Tensor],
-    terms: tuple[list[torch.Tensor], list[torch.Tensor] | None],
-    settings: OnlineSettings,
-) -> torch.Tensor:
-    """constraint: lambda sum (w - w0)^2; margin: lambda sum max(|w - w0| - m, 0)^2;
-    ewc: lambda sum F (w - w0)^2."""
-    refs, fisher = terms
-    total = torch.zeros((), dtype=torch.float64)
-    for k, (p, ref) in enumerate(zip(params, refs, strict=True)):
-        d = p - ref
-        if settings.method == "margin":
-            d = torch.relu(d.abs() - settings.margin)
-        total = total + ((fisher[k] * d * d) if fisher is not None else d * d).sum()
-    return settings.penalty * total
 
 
 def gradient_update(
@@ -149,22 +104,32 @@ def gradient_update(
         pick = rng.choice(len(anchor.memory_x), size=settings.replay_samples, replace=True)
         xb = np.concatenate([x, anchor.memory_x[pick]])
         yb = np.concatenate([y, anchor.memory_y[pick]])
-    ws, bs = _tensors(weights, True), _tensors(biases, True)
-    xt = torch.as_tensor(xb, dtype=torch.float64)
-    yt = torch.as_tensor(yb, dtype=torch.float64)
-    terms = _penalty_terms(settings, anchor)
-    optimiser = torch.optim.Adam(ws + bs, lr=settings.learning_rate, foreach=True)
-    for _ in range(settings.steps):
-        optimiser.zero_grad()
-        loss = torch.mean((forward(ws, bs, xt) - yt) ** 2)
-        if terms is not None:
-            loss = loss + _penalty(ws + bs, terms, settings)
-        loss.backward()
-        optimiser.step()
-    _project(ws, anchor)  # the Lipschitz bounds, re-applied after the update
-    new_w = tuple(w.detach().numpy().copy() for w in ws)
-    new_b = tuple(b.detach().numpy().copy() for b in bs)
-    return Update(new_w, new_b, loss_before, mse(new_w, new_b, x, y))
+    n = len(weights)
+    params = [np.array(a, dtype=np.float64) for a in (*weights, *biases)]
+    penalised = settings.method in ("constraint", "margin", "ewc") and settings.penalty != 0.0
+    refs = (*anchor.weights, *anchor.biases)
+    fisher = (
+        (*anchor.fisher_weights, *anchor.fisher_biases)
+        if settings.method == "ewc" and anchor.fisher_weights is not None
+        else None
+    )
+    if settings.method == "ewc" and penalised and fisher is None:
+        raise ValueError("online method 'ewc' needs the Fisher information of the offline data")
+
+    def gradient(ps: list[np.ndarray]) -> list[np.ndarray]:
+        _, gw, gb = loss_and_gradient(ps[:n], ps[n:], xb, yb)
+        grads = [*gw, *gb]
+        if penalised:
+            extra = penalty_gradient(
+                settings.method, ps, refs, fisher, settings.penalty, settings.margin
+            )
+            grads = [g + e for g, e in zip(grads, extra, strict=True)]
+        return grads
+
+    adam(params, gradient, settings.steps, settings.learning_rate)
+    new_w, new_b = params[:n], params[n:]
+    project(new_w, anchor.layer_bound, anchor.control_bound)  # the bounds, after the update
+    return Update(tuple(new_w), tuple(new_b), loss_before, mse(new_w, new_b, x, y))
 
 
 def initial_rls(

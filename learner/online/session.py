@@ -10,7 +10,7 @@ learner thread, or the control loop itself in deterministic mode) owns the timin
 from __future__ import annotations
 
 import collections
-from dataclasses import asdict, replace
+from dataclasses import asdict, astuple, replace
 from typing import Any
 
 import numpy as np
@@ -28,16 +28,30 @@ from simbridge.config import ConfigError
 
 class OnlineSession:
     def __init__(
-        self, base: GroundEffectNet, settings: OnlineSettings, memory: Memory | None = None
+        self,
+        base: GroundEffectNet,
+        settings: OnlineSettings,
+        memory: Memory | None = None,
+        offline: GroundEffectNet | None = None,
     ) -> None:
+        """`base`: the network the flight starts from; `offline`: the offline weights it came
+        from, when `base` was adapted in an earlier flight (what the protecting methods hold
+        on to and what a reset returns to; default `base`)."""
         self.base = base
+        self.offline = offline if offline is not None else base
         self.memory = memory
         n = base.normaliser
+        m = offline.normaliser if offline is not None else n
+        if not all(np.array_equal(a, b) for a, b in zip(astuple(n), astuple(m), strict=True)):
+            raise ConfigError(
+                "online learning: the offline weights beside the model standardise their "
+                "inputs differently (a different model's file?)"
+            )
         self._x_mean, self._x_std, self._y_mean, self._y_std = n.x_mean, n.x_std, n.y_mean, n.y_std
         self.target_scale_n = float(np.max(n.y_std))
         self._anchor = Anchor(
-            tuple(base.weights),
-            tuple(base.biases),
+            tuple(self.offline.weights),
+            tuple(self.offline.biases),
             layer_bound=float(base.header.get("layer_bound", DEFAULT_LAYER_BOUND)),
             control_bound=base.header.get("control_column_bound"),
             output_offset=self._y_mean / self._y_std,
@@ -79,6 +93,15 @@ class OnlineSession:
             a = replace(a, fisher_weights=fw, fisher_biases=fb)
         self._anchor = a
 
+    def warm_up(self) -> None:
+        """One update on a dummy batch, thrown away: torch initialises its optimiser on the
+        first step (over a second), which must not happen in the first update of a flight."""
+        n = self.settings.batch_size
+        x, y = np.zeros((n, len(self._x_mean))), np.zeros((n, len(self._y_mean)))
+        weights, biases = tuple(self.base.weights), tuple(self.base.biases)
+        with np.errstate(all="ignore"):
+            update(weights, biases, x, y, self.settings, self._anchor, None, 0)
+
     def _standardise(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return (x - self._x_mean) / self._x_std, (y - self._y_mean) / self._y_std
 
@@ -92,6 +115,33 @@ class OnlineSession:
             self.counts["outliers"] += 1  # as offline training drops them (thesis 3.5.2)
             return None
         x, y = self._standardise(np.asarray(features, float), np.asarray(target_n, float))
+        return self._take(x, y, t_s)
+
+    def add_many(
+        self, features: np.ndarray, targets_n: np.ndarray, times_s: np.ndarray
+    ) -> list[tuple[float, Snapshot | None, float | None]]:
+        """Samples in a block (rows as `add` takes them), with the same result as adding
+        them one by one; for every update they triggered: (time, the new snapshot or None
+        if the guards rejected it, the batch's loss before the update)."""
+        lo, hi = OUTLIER_RANGE_N
+        good = (
+            (targets_n[:, 2] >= lo)
+            & (targets_n[:, 2] <= hi)
+            & np.all(np.isfinite(features), axis=1)
+            & np.all(np.isfinite(targets_n), axis=1)
+        )
+        self.counts["outliers"] += int(np.count_nonzero(~good))
+        xs, ys = self._standardise(features[good], targets_n[good])
+        events: list[tuple[float, Snapshot | None, float | None]] = []
+        for x, y, t_s in zip(xs, ys, times_s[good], strict=True):
+            updates = self.counts["updates"]
+            snapshot = self._take(x, y, float(t_s))
+            if self.counts["updates"] != updates:
+                events.append((float(t_s), snapshot, self.last_loss))
+        return events
+
+    def _take(self, x: np.ndarray, y: np.ndarray, t_s: float) -> Snapshot | None:
+        """A standardised sample: to the guard's buffer or the batch; the update when full."""
         self._seen += 1
         self.counts["samples"] += 1
         if self._seen % self.settings.holdout_every == 0:
@@ -144,23 +194,30 @@ class OnlineSession:
         return None
 
     def reset(self, t_s: float) -> Snapshot:
-        """Back to the offline weights (a new version, so readers see the change)."""
+        """Back to the offline weights (a new version, so readers see the change); the RLS
+        prior is built again from them."""
         self._x, self._y = [], []
         self._holdout.clear()
         self._rls = None
         self.counts["resets"] += 1
-        self.snapshot = Snapshot(self.snapshot.version + 1, self.base, t_s)
+        self.snapshot = Snapshot(self.snapshot.version + 1, self.offline, t_s)
         return self.snapshot
 
     def adapted_header(self) -> dict[str, Any]:
         """The model file's header for the current snapshot: where it came from, how."""
-        return {
-            **self.base.header,
-            "online": {
-                "settings": asdict(self.settings),
-                "version": self.snapshot.version,
-                "updates": self.counts["updates"],
-                "accepted": self.counts["accepted"],
-                "samples": self.counts["samples"],
-            },
-        }
+        return adapted_header(self.base.header, self.settings, self.snapshot.version, self.counts)
+
+
+def adapted_header(
+    base_header: dict[str, Any], settings: OnlineSettings, version: int, counts: dict[str, int]
+) -> dict[str, Any]:
+    return {
+        **base_header,
+        "online": {
+            "settings": asdict(settings),
+            "version": version,
+            "updates": counts.get("updates", 0),
+            "accepted": counts.get("accepted", 0),
+            "samples": counts.get("samples", 0),
+        },
+    }
