@@ -208,7 +208,7 @@ def test_the_learner_process_resets_in_order_and_a_second_flight_holds_on_to_the
     assert np.array_equal(session._anchor.weights[0], BASE.weights[0])
     assert session.reset(0.0).net is offline
     (tmp_path / "adapted.offline.npz").unlink()
-    with pytest.raises(ConfigError, match="adapted.offline.npz is missing"):
+    with pytest.raises(ConfigError, match=r"adapted\.offline\.npz is missing"):
         find_offline(saved, 1.0, adapted)
 
 
