@@ -40,11 +40,8 @@ def learner_main(
         cpus = sorted(os.sched_getaffinity(0))
         if len(cpus) > 1:
             os.sched_setaffinity(0, {cpus[-1]})  # one core: the scheduler moves the loop off it
-    import torch
+    from learner.online.session import OnlineSession  # numpy only: up in a fraction of a second
 
-    from learner.online.session import OnlineSession
-
-    torch.set_num_threads(1)  # one core: the other belongs to the control loop
     try:
         session = OnlineSession(base, settings, memory, offline)
         session.warm_up()

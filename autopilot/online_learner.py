@@ -65,9 +65,6 @@ class OnlineLearner:
         self.losses: list[tuple[float, float, int]] = []  # (t, loss, version) per update
         self.session: OnlineSession | None = None
         if deterministic:
-            import torch
-
-            torch.set_num_threads(1)  # the update runs in the control thread: one core
             self.session = OnlineSession(base, settings, memory, offline)
             self.session.warm_up()  # not in the first update of the flight
             return

@@ -15,6 +15,7 @@ import numpy as np
 # grows tenfold: at 2 per layer (16 overall) the network cannot be that steep in z and
 # explains the effect through the rotor speeds instead. 4 per layer lets it follow z; the
 # control input keeps its own, much tighter bound (below).
+LAYERS = (12, 25, 30, 15, 3)  # thesis 3.5.3: 12 features -> 3 force components, ReLU
 DEFAULT_LAYER_BOUND = 4.0
 CONTROL_COLUMNS = (8, 9, 10, 11)  # n0..n3 among the 12 features (learner.dataset.FEATURES)
 DEFAULT_CONTROL_GAIN_BOUND = 0.5  # N of predicted force per N of thrust, at most

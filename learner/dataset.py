@@ -18,6 +18,8 @@ import numpy as np
 from learner.npzfile import read_npz
 from simbridge.config import ConfigError
 
+OUTLIER_RANGE_N = (-1e-3, 1.0)  # thesis 3.5.2: samples with f_ge,z outside are dropped
+
 FORMAT = "groundfx-dataset"
 VERSION = 1
 FEATURES = ("z", "vx", "vy", "vz", "qw", "qx", "qy", "qz", "n0", "n1", "n2", "n3")

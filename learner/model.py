@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from learner.bounds import LAYERS
 from learner.dataset import FEATURES, TARGETS
-from learner.network import LAYERS
 from learner.npzfile import read_npz
 from simbridge.config import ConfigError, resolve_packaged
 

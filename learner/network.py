@@ -26,6 +26,7 @@ from learner.bounds import (
     CONTROL_COLUMNS,
     DEFAULT_CONTROL_GAIN_BOUND,
     DEFAULT_LAYER_BOUND,
+    LAYERS,
     control_column_bound,
 )
 
@@ -36,8 +37,6 @@ __all__ = [
     "LAYERS",
     "control_column_bound",
 ]
-
-LAYERS = (12, 25, 30, 15, 3)
 
 
 def build_network(layers: tuple[int, ...] = LAYERS, seed: int = 0) -> torch.nn.Sequential:

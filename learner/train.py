@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from learner.dataset import FEATURES, TARGETS, Dataset
+from learner.dataset import FEATURES, OUTLIER_RANGE_N, TARGETS, Dataset
 from learner.model import GroundEffectNet, Normaliser, save_model
 from learner.network import (
     CONTROL_COLUMNS,
@@ -38,8 +38,6 @@ from learner.network import (
     spectral_norms,
 )
 from simbridge.config import param
-
-OUTLIER_RANGE_N = (-1e-3, 1.0)  # thesis 3.5.2, on f_ge,z
 
 
 @dataclass(frozen=True)

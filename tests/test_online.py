@@ -292,21 +292,52 @@ def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_pau
     assert paused["online_version"] == 0 and paused["online_ignored_paused"] > 100
 
 
+def test_a_ground_station_flight_learns_in_the_learner_process():
+    """Through a ground station (pymavlink uploads, arms, starts) the learner runs
+    asynchronously in its own process: it learns during the lockstep flight at full speed,
+    adapts the rho1 network in the rho 2 world, and stops with the flight."""
+    from mission.fly import fly
+    from mission.online_bench import BENCH_MISSION
+
+    summary = fly(
+        BENCH_MISSION,
+        "rho2",
+        "neural",
+        network="rho1",
+        via_gcs=True,
+        record=False,
+        autopilot_options=("--online", "naive"),
+    )
+    assert summary["landed"] and summary["online_mode"] == "asynchronous", summary
+    assert summary["online_errors"] == []
+    assert summary["online_updates"] > 10 and summary["online_version"] > 0
+    assert summary["online_accepted"] + summary["online_rejected"] == summary["online_updates"]
+    # the queue drops what a starved learner cannot take (counted; a loaded machine), but
+    # the learner took most, and learnt from every sample it took before it stopped
+    assert summary["online_dropped"] < summary["online_samples"]
+    assert summary["online_samples"] // 64 >= summary["online_updates"] > 10
+
+
 def test_a_protecting_method_adapts_to_rho2_and_forgets_less_than_naive(tmp_path):
     """Experiments 4.3/4.4 at the smallest scale (seed 0, deterministic): the rho1 network
-    adapted in a rho_sim = 2 world by `constraint` holds closer than offline-only there, and
-    carried back to rho = 1 (learning off) it holds closer than the network `naive` adapted."""
-    from mission.online_eval import hold_error, trial_file, world_file
+    adapted in a rho_sim = 2 world by `naive` and by `replay` holds closer than offline-only
+    there; carried back to rho = 1 (learning off), the one `replay` adapted has kept what
+    the offline network knew far from the ground, where rho 1 and rho 2 agree, and the one
+    `naive` adapted has lost it (judged along the offline network's own rho 1 flight)."""
+    from mission.online_eval import far_error_n, hold_error, trial_file, world_file
 
     mission, start = trial_file(tmp_path, 0, 10.0)
     rho2, rho1 = world_file(tmp_path, 2.0), world_file(tmp_path, 1.0)
-    lam = ("--param", "GFX_OL_LAMBDA=1000")
     offline = hold_error(mission, start, rho2, "neural", 2.0, "rho1")
-    errors = {}
-    for method in ("naive", "constraint"):
+    log = tmp_path / "offline_rho1.csv"
+    hold_error(mission, start, rho1, "neural", 1.0, "rho1", flight_log=log)
+    offline_far = far_error_n(log, "rho1", rho1, 1.0)
+    errors, far = {}, {}
+    for method in ("naive", "replay"):
         saved = tmp_path / f"{method}.npz"
-        adapting = ("--online", method, *lam, "--save-model", str(saved))
+        adapting = ("--online", method, "--save-model", str(saved))
         errors[method] = hold_error(mission, start, rho2, "neural", 2.0, "rho1", *adapting)
-        errors[method + " at rho 1"] = hold_error(mission, start, rho1, "neural", 1.0, str(saved))
-    assert errors["constraint"] < offline, errors
-    assert errors["constraint at rho 1"] < errors["naive at rho 1"], errors
+        far[method] = far_error_n(log, saved, rho1, 1.0)
+    assert errors["naive"] < offline and errors["replay"] < offline, (offline, errors)
+    assert offline_far < 0.002, offline_far  # the offline network knows the far field
+    assert far["replay"] < 0.5 * far["naive"], far

@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from learner.network import CONTROL_COLUMNS
+from learner.bounds import CONTROL_COLUMNS
 
 Arrays = tuple[np.ndarray, ...]
 GradientFn = Callable[[list[np.ndarray]], list[np.ndarray]]

@@ -9,13 +9,16 @@ projection; `rls` solves for the last layer in closed form and carries its covar
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
-from learner.network import DEFAULT_LAYER_BOUND
+from learner.bounds import DEFAULT_LAYER_BOUND
 from learner.online.gradient import adam, loss_and_gradient, penalty_gradient, project
 from learner.online.settings import NEEDS_MEMORY, OnlineSettings
+
+if TYPE_CHECKING:  # torch only for ewc's Fisher information: the learner starts without it
+    import torch
 
 Arrays = tuple[np.ndarray, ...]
 
@@ -53,6 +56,8 @@ class Update:
 
 
 def forward(ws: list[torch.Tensor], bs: list[torch.Tensor], x: torch.Tensor) -> torch.Tensor:
+    import torch
+
     h = x
     for i, (w, b) in enumerate(zip(ws, bs, strict=True)):
         h = h @ w.T + b
@@ -215,7 +220,10 @@ def diagonal_fisher(
 ) -> tuple[Arrays, Arrays]:
     """The empirical diagonal Fisher information of the (standardised) offline samples: the
     mean squared per-sample gradient of the squared error, normalised to mean 1."""
+    import torch
     from torch.func import grad, vmap
+
+    torch.set_num_threads(1)  # a tiny network beside a control loop: one core
 
     params = tuple(torch.tensor(a, dtype=torch.float64) for a in (*weights, *biases))
     n = len(weights)

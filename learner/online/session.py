@@ -15,14 +15,14 @@ from typing import Any
 
 import numpy as np
 
+from learner.bounds import DEFAULT_LAYER_BOUND
+from learner.dataset import OUTLIER_RANGE_N
 from learner.model import GroundEffectNet
-from learner.network import DEFAULT_LAYER_BOUND
 from learner.online.guards import check_update
 from learner.online.memory import Memory
 from learner.online.methods import Anchor, RlsState, diagonal_fisher, update
 from learner.online.settings import NEEDS_MEMORY, OnlineSettings
 from learner.online.snapshot import Snapshot, make_snapshot
-from learner.train import OUTLIER_RANGE_N
 from simbridge.config import ConfigError
 
 

@@ -130,7 +130,7 @@ def _c(name: str, label: str, trials: int, *flights: Flight, group: str = "") ->
 # `none` flies long (without a model the landing waits ~65 simulated seconds for the sinking
 # setpoint to overcome the ground effect) and alike (spread 0.01 mm): few trials measure it.
 BASELINE_TRIALS = 2
-# Online learning runs a torch update per 64 samples and 4.4 flies two flights per trial:
+# Online learning runs an update per 64 samples and 4.4 flies two flights per trial:
 # with six methods in 4.4 and 4.5, two trials per method keep `all` within 15 minutes on
 # two cores; --trials N asks for more.
 ONLINE_TRIALS = 3
