@@ -104,6 +104,11 @@ class OnlineControl:
                 f"--online {settings.method}: needs stored offline samples beside the "
                 "network (NAME.memory.npz; make one with groundfx learn memory)"
             )
+        if settings is not None and params.model()[0] == "neural":
+            from learner.model import load_model
+
+            rho = params.model()[1]
+            find_offline(network, rho, load_model(network or default_network(rho)))
 
     @property
     def sample_hz(self) -> float:
@@ -143,7 +148,7 @@ class OnlineControl:
 
     def wait_ready(self) -> None:
         """Before the flight (never in it): until the learner process is up, so that a fast
-        lockstep flight does not pass while it imports torch."""
+        lockstep flight does not pass while it starts."""
         if self.learner is not None and not self.learner.wait_ready():
             self.errors.append("the learner process was not up within a minute of the start")
 

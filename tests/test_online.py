@@ -240,6 +240,23 @@ def test_online_parameters_have_ranges_and_the_options_clear_errors(tmp_path):
         "none",
     )
     assert r.returncode == 2 and "--online ewc: needs stored offline samples" in r.stderr
+    adapted = OnlineLearner(BASE, OnlineSettings()).save(tmp_path / "adapted.npz")
+    (tmp_path / "adapted.offline.npz").unlink()
+    r = run_groundfx(
+        "autopilot",
+        "--sim",
+        "tcp:127.0.0.1:9",
+        "--model",
+        "neural",
+        "--network",
+        str(adapted),
+        "--online",
+        "constraint",
+        "--no-gcs",
+        "--params-file",
+        "none",
+    )
+    assert r.returncode == 2 and "adapted.offline.npz is missing" in r.stderr, r.stderr
 
 
 def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_paused(tmp_path):
