@@ -1,22 +1,22 @@
 """The online learner's arithmetic, in a process of its own.
 
 Why a process: CPython runs one thread's bytecode at a time. Computed on a thread of the
-autopilot, an update (ten Adam steps in torch, tens of thousands of small operations) held
-the interpreter while the control loop waited for it: in lockstep at full speed the loop
-ran at 0.40 of its learner-off rate and its p99 step latency rose 2.9-fold. In a process of
-its own the update runs on the machine's other core and the control loop never shares an
-interpreter with it. The process is started with `spawn` (a fork of a threaded autopilot
-could inherit a lock held by another thread), runs at a lower priority than the loop, and
-keeps to one core (the last), so that the scheduler can keep the loop's processes on the
-others instead of sharing every core with the learner's bursts.
+autopilot, an update (hundreds of small array operations, each holding the interpreter)
+kept the control loop waiting: in lockstep at full speed the loop ran at 0.40 of its
+learner-off rate and its p99 step latency rose 2.9-fold. In a process of its own the update
+runs beside the loop, which never shares an interpreter with it. The process is started
+with `spawn` (a fork of a threaded autopilot could inherit a lock held by another thread),
+runs at a lower priority than the loop, and keeps to one core (the last), so that the
+scheduler can keep the loop's processes on the others instead of sharing every core with
+the learner's bursts.
 
-Protocol over one duplex pipe (pickled tuples), parent -> learner: ("samples", rows),
-("reset", t_s), ("configure", settings), ("close",). Learner -> parent: ("ready",),
-("snapshot", version, weights,
-biases, t_s, loss), ("rejected", t_s, loss), ("reset", version, t_s), ("error", text) and,
-last, ("summary", counts, reject_reasons, last_loss). A row is t, the 12 features, the 3
-targets. The count of samples taken off the pipe is a shared integer (`taken`), which the
-loop's side reads to bound the queue without a message per chunk.
+Protocol over one duplex pipe (pickled tuples). Parent to learner: ("samples", rows),
+("reset", t_s), ("configure", settings), ("close",). Learner to parent: ("ready",),
+("snapshot", version, weights, biases, t_s, loss), ("rejected", t_s, loss), ("reset",
+version, t_s), ("error", text) and, last, ("summary", counts, reject_reasons, last_loss).
+A row is t, the 12 features, the 3 targets. The count of samples taken off the pipe is a
+shared integer (`taken`), which the loop's side reads to bound the queue without a message
+per chunk.
 """
 
 from __future__ import annotations

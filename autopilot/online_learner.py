@@ -149,7 +149,7 @@ class OnlineLearner:
 
     def close(self) -> None:
         """Let the learner finish the samples already sent, then stop it."""
-        if self.session is not None or not hasattr(self, "_process"):
+        if self.session is not None:
             return
         self._command("close", None)
         self._thread.join(timeout=60.0)
