@@ -95,6 +95,8 @@ def far_error_n(flight_log: Path, network: str | Path, world: Path, rho: float) 
     log = read_log(flight_log)
     height = log.position_m[:, 2]
     far = height >= FAR_FROM_GROUND_M
+    if not far.any():
+        return float("nan")  # the flight never got that high
     n = log.rotor_speeds_rad_s[far]
     features = np.column_stack([height[far], log.velocity_m_s[far], log.quaternion[far], n])
     radius = vehicle.rotor_radius_m

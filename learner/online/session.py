@@ -94,8 +94,9 @@ class OnlineSession:
         self._anchor = a
 
     def warm_up(self) -> None:
-        """One update on a dummy batch, thrown away: torch initialises its optimiser on the
-        first step (over a second), which must not happen in the first update of a flight."""
+        """One update on a dummy batch, thrown away: the first update pays one-time costs
+        (imports, ewc's Fisher set-up, numpy's linear algebra), which must not fall into the
+        first update of a flight (with torch's optimiser it was over a second)."""
         n = self.settings.batch_size
         x, y = np.zeros((n, len(self._x_mean))), np.zeros((n, len(self._y_mean)))
         weights, biases = tuple(self.base.weights), tuple(self.base.biases)
