@@ -1,4 +1,4 @@
-"""The network's Lipschitz bounds (learner.network applies them), importable without torch.
+"""The network's shape and Lipschitz bounds (learner.network applies them), without torch.
 
 The rotor speeds are the control input, and the controller finds the input that the
 prediction itself depends on (a fixed point). Neural Lander's stability condition is that the
@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
+LAYERS = (12, 25, 30, 15, 3)  # thesis 3.5.3: 12 features -> 3 force components, ReLU
+
 # Neural Lander keeps each layer at 2. Here z is standardised over flights up to 1.5 m, so the
 # last 3 cm above the ground are a tenth of a standard deviation across which the effect
 # grows tenfold: at 2 per layer (16 overall) the network cannot be that steep in z and
 # explains the effect through the rotor speeds instead. 4 per layer lets it follow z; the
 # control input keeps its own, much tighter bound (below).
-LAYERS = (12, 25, 30, 15, 3)  # thesis 3.5.3: 12 features -> 3 force components, ReLU
 DEFAULT_LAYER_BOUND = 4.0
 CONTROL_COLUMNS = (8, 9, 10, 11)  # n0..n3 among the 12 features (learner.dataset.FEATURES)
 DEFAULT_CONTROL_GAIN_BOUND = 0.5  # N of predicted force per N of thrust, at most
