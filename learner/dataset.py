@@ -20,6 +20,19 @@ from simbridge.config import ConfigError
 
 OUTLIER_RANGE_N = (-1e-3, 1.0)  # thesis 3.5.2: samples with f_ge,z outside are dropped
 
+
+def inliers(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The rows kept for learning (offline and online alike): f_ge,z within OUTLIER_RANGE_N,
+    every feature and target finite."""
+    lo, hi = OUTLIER_RANGE_N
+    return (
+        (y[:, 2] >= lo)
+        & (y[:, 2] <= hi)
+        & np.all(np.isfinite(x), axis=1)
+        & np.all(np.isfinite(y), axis=1)
+    )
+
+
 FORMAT = "groundfx-dataset"
 VERSION = 1
 FEATURES = ("z", "vx", "vy", "vz", "qw", "qx", "qy", "qz", "n0", "n1", "n2", "n3")

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from learner.dataset import FEATURES, OUTLIER_RANGE_N, TARGETS, Dataset
+from learner.dataset import FEATURES, TARGETS, Dataset, inliers
 from learner.model import GroundEffectNet, Normaliser, save_model
 from learner.network import (
     CONTROL_COLUMNS,
@@ -73,13 +73,7 @@ def training_arrays(datasets: list[Dataset]) -> tuple[np.ndarray, np.ndarray, in
     """Features and targets of all datasets with the outliers dropped; and how many were."""
     x = np.concatenate([d.matrix(FEATURES) for d in datasets])
     y = np.concatenate([d.matrix(TARGETS) for d in datasets])
-    lo, hi = OUTLIER_RANGE_N
-    keep = (
-        (y[:, 2] >= lo)
-        & (y[:, 2] <= hi)
-        & np.all(np.isfinite(x), axis=1)
-        & np.all(np.isfinite(y), axis=1)
-    )
+    keep = inliers(x, y)
     return x[keep], y[keep], int((~keep).sum())
 
 

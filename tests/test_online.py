@@ -225,38 +225,30 @@ def test_online_parameters_have_ranges_and_the_options_clear_errors(tmp_path):
         OnlineSettings(method="sgd")
     r = run_groundfx("fly", "mission/examples/hover.yaml", "--model", "analytic", "--online", "rls")
     assert r.returncode == 2 and "--online rls: needs --model neural" in r.stderr
-    r = run_groundfx(
-        "autopilot",
-        "--sim",
-        "tcp:127.0.0.1:9",
-        "--model",
-        "neural",
-        "--network",
-        "rho2",
-        "--online",
-        "ewc",
-        "--no-gcs",
-        "--params-file",
-        "none",
-    )
-    assert r.returncode == 2 and "--online ewc: needs stored offline samples" in r.stderr
+
+    def refusal(network: str, method: str) -> str:
+        """What the autopilot says when it refuses to start (exit code 2)."""
+        r = run_groundfx(
+            "autopilot",
+            "--sim",
+            "tcp:127.0.0.1:9",
+            "--model",
+            "neural",
+            "--network",
+            network,
+            "--online",
+            method,
+            "--no-gcs",
+            "--params-file",
+            "none",
+        )
+        assert r.returncode == 2, r.stderr
+        return r.stderr
+
+    assert "--online ewc: needs stored offline samples" in refusal("rho2", "ewc")
     adapted = OnlineLearner(BASE, OnlineSettings()).save(tmp_path / "adapted.npz")
     (tmp_path / "adapted.offline.npz").unlink()
-    r = run_groundfx(
-        "autopilot",
-        "--sim",
-        "tcp:127.0.0.1:9",
-        "--model",
-        "neural",
-        "--network",
-        str(adapted),
-        "--online",
-        "constraint",
-        "--no-gcs",
-        "--params-file",
-        "none",
-    )
-    assert r.returncode == 2 and "adapted.offline.npz is missing" in r.stderr, r.stderr
+    assert "adapted.offline.npz is missing" in refusal(str(adapted), "constraint")
 
 
 def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_paused(tmp_path):

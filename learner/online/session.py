@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from learner.bounds import DEFAULT_LAYER_BOUND
-from learner.dataset import OUTLIER_RANGE_N
+from learner.dataset import inliers
 from learner.model import GroundEffectNet
 from learner.online.guards import check_update
 from learner.online.memory import Memory
@@ -109,14 +109,11 @@ class OnlineSession:
     def add(self, features: np.ndarray, target_n: np.ndarray, t_s: float) -> Snapshot | None:
         """One sample (12 features, f_ge of equation 3.16 [N]); the new snapshot if this
         sample completed a batch whose update was accepted."""
-        lo, hi = OUTLIER_RANGE_N
-        if not (lo <= target_n[2] <= hi) or not (
-            np.all(np.isfinite(features)) and np.all(np.isfinite(target_n))
-        ):
+        x, y = np.asarray(features, float), np.asarray(target_n, float)
+        if not inliers(x[None, :], y[None, :])[0]:
             self.counts["outliers"] += 1  # as offline training drops them (thesis 3.5.2)
             return None
-        x, y = self._standardise(np.asarray(features, float), np.asarray(target_n, float))
-        return self._take(x, y, t_s)
+        return self._take(*self._standardise(x, y), t_s)
 
     def add_many(
         self, features: np.ndarray, targets_n: np.ndarray, times_s: np.ndarray
@@ -124,13 +121,7 @@ class OnlineSession:
         """Samples in a block (rows as `add` takes them), with the same result as adding
         them one by one; for every update they triggered: (time, the new snapshot or None
         if the guards rejected it, the batch's loss before the update)."""
-        lo, hi = OUTLIER_RANGE_N
-        good = (
-            (targets_n[:, 2] >= lo)
-            & (targets_n[:, 2] <= hi)
-            & np.all(np.isfinite(features), axis=1)
-            & np.all(np.isfinite(targets_n), axis=1)
-        )
+        good = inliers(features, targets_n)
         self.counts["outliers"] += int(np.count_nonzero(~good))
         xs, ys = self._standardise(features[good], targets_n[good])
         events: list[tuple[float, Snapshot | None, float | None]] = []
