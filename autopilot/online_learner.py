@@ -27,7 +27,13 @@ from typing import Any
 
 import numpy as np
 
-from autopilot.learner_process import ROW_WIDTH, learner_main
+from autopilot.learner_process import (
+    ROW_FEATURES,
+    ROW_TARGETS,
+    ROW_TIME,
+    ROW_WIDTH,
+    learner_main,
+)
 from learner.model import GroundEffectNet, save_model
 from learner.online.memory import Memory
 from learner.online.session import OnlineSession, adapted_header
@@ -99,9 +105,9 @@ class OnlineLearner:
             self._learn(features, target_n, t_s)
             return
         row = self._chunk[self._filled]
-        row[0] = t_s
-        row[1:13] = features
-        row[13:16] = target_n
+        row[ROW_TIME] = t_s
+        row[ROW_FEATURES] = features
+        row[ROW_TARGETS] = target_n
         self._filled += 1
         if self._filled == self._chunk_samples:
             self._flush()

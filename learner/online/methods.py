@@ -83,14 +83,6 @@ def mse(weights: Arrays, biases: Arrays, x: np.ndarray, y: np.ndarray) -> float:
     return float(np.mean((forward_np(weights, biases, x) - y) ** 2))
 
 
-def project_weights(weights: Arrays, bound: float) -> Arrays:
-    out = []
-    for w in weights:
-        sigma = float(np.linalg.norm(w, ord=2))
-        out.append(w * (bound / sigma) if sigma > bound else w.copy())
-    return tuple(out)
-
-
 def gradient_update(
     weights: Arrays,
     biases: Arrays,
@@ -181,7 +173,8 @@ def rls_update(
     trace = float(np.trace(p))
     if trace > state.max_trace:  # bounded covariance: no wind-up without excitation
         p *= state.max_trace / trace
-    last_w = project_weights((theta[:, :-1],), layer_bound)[0]
+    last_w = theta[:, :-1].copy()
+    project([last_w], layer_bound, None)  # the last layer's bound (no rotor-speed columns)
     new_w = (*weights[:-1], last_w)
     new_b = (*biases[:-1], theta[:, -1].copy())
     return Update(new_w, new_b, loss_before, mse(new_w, new_b, x, y), RlsState(p, state.max_trace))
