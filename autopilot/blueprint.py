@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import rerun.blueprint as rrb
 
-from autopilot.recording import EVENTS, MAVLINK, TIMELINE, WORLD
+from learner.flightlogs.recording import EVENTS, MAVLINK, TIMELINE, WORLD
 from simbridge.frames import Vec3
 
 EYE_OFFSET_M = (-1.6, -1.6, 1.0)  # where the 3-D camera stands, from the point it looks at

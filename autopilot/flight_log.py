@@ -1,5 +1,5 @@
 """`--flight-log`: every airborne control step as a row of the gap diagnosis's log format
-(learner/gap/logs.py), written when the flight ends."""
+(learner/flightlogs/flightlog.py), written when the flight ends."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 
 from autopilot.controller import FlightState
 from autopilot.simlink import Step
-from learner.gap.logs import FlightLog, write_log
+from learner.flightlogs.flightlog import FlightLog, write_log
 from simbridge.frames import frd_to_flu, quat_to_matrix, rotate
 from simbridge.rotors import Quad
 from simbridge.vehicle import GRAVITY_M_S2

@@ -1,7 +1,7 @@
 """The flight recorder's writer: `FlightRecorder`, opened through `autopilot.recorder`.
 
 See `autopilot.recorder` for what it records and how it keeps out of the loop's way, and
-`autopilot.recording` for the layout.
+`learner.flightlogs.recording` for the layout.
 """
 
 from __future__ import annotations
@@ -20,9 +20,17 @@ import rerun as rr
 from autopilot.blueprint import default_blueprint
 from autopilot.controller import ControlOutput, FlightState, Setpoint
 from autopilot.mission_items import PlanStep
-from autopilot.recorder import FLUSH_WALL_S, RecordOptions
+from autopilot.record_options import FLUSH_WALL_S, RecordOptions
 from autopilot.recorder_rows import RowSender, scalars_key
-from autopilot.recording import (
+from autopilot.rrbatch import ColumnBatch
+from autopilot.scene import (
+    log_drone,
+    log_mission,
+    log_world,
+    mission_path,
+)
+from autopilot.simlink import Step
+from learner.flightlogs.recording import (
     APPLICATION_ID,
     COUNTERS,
     EVENTS,
@@ -35,14 +43,6 @@ from autopilot.recording import (
     SERIES,
     TIMELINE,
 )
-from autopilot.rrbatch import ColumnBatch
-from autopilot.scene import (
-    log_drone,
-    log_mission,
-    log_world,
-    mission_path,
-)
-from autopilot.simlink import Step
 from simbridge.frames import Vec3
 from simbridge.rotors import Quad
 from simbridge.vehicle import Vehicle

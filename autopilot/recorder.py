@@ -3,7 +3,7 @@
 The simulator's truth reaches the autopilot over MAVLink (the true state in
 HIL_STATE_QUATERNION, the true ground-effect force in DEBUG_VECT "GE_TRUE", the actual rotor
 speeds in ESC telemetry), so the autopilot alone writes truth and its own view side by side:
-one process, one file, one recording id. The layout is `autopilot.recording`'s.
+one process, one file, one recording id. The layout is `learner.flightlogs.recording`'s.
 
 The loop must not wait for it. `step` appends one tuple per control step; every
 `flush_every_s` of simulated time (or FLUSH_WALL_S of wall time, if that comes first) the
@@ -15,10 +15,10 @@ last flush (and the footer: the reader copes).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
-from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Protocol
+
+from autopilot.record_options import RecordOptions
 
 if TYPE_CHECKING:
     from autopilot.controller import ControlOutput, FlightState, Setpoint
@@ -27,10 +27,6 @@ if TYPE_CHECKING:
     from simbridge.frames import Vec3
     from simbridge.rotors import Quad
     from simbridge.vehicle import Vehicle
-    from simbridge.world import World
-
-FLUSH_EVERY_S = 4.0  # simulated seconds between flushes, at most (what a SIGKILL may lose)
-FLUSH_WALL_S = 0.5  # ... and wall seconds: when the simulator runs slower than 8x real time
 
 
 class Recorder(Protocol):
@@ -59,17 +55,6 @@ class Recorder(Protocol):
     ) -> None: ...
     def close(self, ended: str) -> None: ...
     def stats(self) -> dict[str, float]: ...
-
-
-@dataclass(frozen=True)
-class RecordOptions:
-    """Where and what to record: the file, and the world drawn in it (the autopilot does not
-    know the simulator's world; the world file is passed for the picture only)."""
-
-    path: Path
-    world: World | None = None
-    info: Mapping[str, Any] | None = None  # stored in the recording's meta (model, rho, ...)
-    flush_every_s: float = FLUSH_EVERY_S
 
 
 class NullRecorder:

@@ -13,7 +13,9 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from autopilot.recording import (
+from autopilot.rrbatch import ColumnBatch
+from autopilot.trail import Trail, firsts
+from learner.flightlogs.recording import (
     DRONE,
     GE_ARROW_M_PER_N,
     GE_PREDICTED_ARROW,
@@ -22,8 +24,6 @@ from autopilot.recording import (
     TIMELINE,
     TRAJECTORY,
 )
-from autopilot.rrbatch import ColumnBatch
-from autopilot.trail import Trail, firsts
 from simbridge.frames import quat_to_matrices
 from simbridge.hil import RAD_S_TO_RPM
 from simbridge.vehicle import GRAVITY_M_S2

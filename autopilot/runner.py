@@ -29,7 +29,8 @@ from autopilot.mission_items import MissionItem
 from autopilot.modes import FlightMode
 from autopilot.online_control import OnlineControl, OnlineOptions
 from autopilot.params import ParamStore
-from autopilot.recorder import RecordOptions, open_recorder
+from autopilot.record_options import RecordOptions
+from autopilot.recorder import open_recorder
 from autopilot.signing import Signing
 from autopilot.simlink import LinkLost, SimLink, Step
 from simbridge.frames import (
@@ -237,7 +238,14 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     samples: list[tuple[float, ...]] = []
     next_sample_s = 0.0
     # The recorder first: the simulator's clock starts when the link connects.
-    recorder = open_recorder(config.record, vehicle, MODES)
+    record = config.record
+    if record is not None:  # which rows are airborne, for readers of the recording
+        airborne = {
+            "airborne_modes": [p.value for p in RECORDED_PHASES],
+            "airborne_margin_m": AIRBORNE_MARGIN_M,
+        }
+        record = dataclasses.replace(record, info={**(record.info or {}), **airborne})
+    recorder = open_recorder(record, vehicle, MODES)
     online_options = dataclasses.replace(config.online, on_report=recorder.learner)
     online = OnlineControl(online_options, config.params, config.network)
     online.refresh(tuning.model, 0.0)

@@ -12,7 +12,7 @@ import numpy as np
 import rerun as rr
 
 from autopilot.mission_items import PlanStep
-from autopilot.recording import (
+from learner.flightlogs.recording import (
     DRONE_ARMS,
     DRONE_BODY,
     DRONE_ROTORS,

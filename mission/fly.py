@@ -11,8 +11,8 @@ from pathlib import Path
 from typing import Any
 
 from autopilot.mission_items import Home
-from mission.formats import load_mission_file
 from mission.gcs_client import GroundStation, GroundStationError, VehicleEnded
+from mission.plans.formats import load_mission_file
 from mission.recordings import default_recording_path
 from simbridge.config import ConfigError
 from simbridge.launch import finish, start_sim

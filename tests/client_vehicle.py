@@ -21,7 +21,7 @@ from typing import Any
 
 import pytest
 
-from mission.formats import load_mission_file
+from mission.plans.formats import load_mission_file
 from simbridge.frames import geodetic_to_local
 from simbridge.launch import start_sim
 from tests.helpers import REPO

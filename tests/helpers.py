@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
@@ -17,3 +19,32 @@ def run_groundfx(*args: str, timeout: float = 120.0) -> subprocess.CompletedProc
         timeout=timeout,
         cwd=REPO,
     )
+
+
+def wait_for(
+    condition: Callable[[], bool],
+    what: str,
+    process: subprocess.Popen | None = None,
+    timeout_s: float = 300.0,
+) -> None:
+    """Wait for a state, not for a time: poll `condition` until it holds. The timeout only
+    ends a test that would otherwise hang; `process` must stay alive meanwhile."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if process is not None and process.poll() is not None:
+            out, err = process.communicate()
+            raise AssertionError(f"the process ended before {what}: {out}\n{err}")
+        if time.monotonic() > deadline:
+            raise AssertionError(f"not {what} within {timeout_s:g} s")
+        time.sleep(0.1)
+
+
+def recorded_s(path: Path) -> float:
+    """How far a recording being written has got (simulated seconds; 0 before it has rows)."""
+    from learner.flightlogs.recording import RecordingError, read_recording
+
+    try:
+        t = read_recording(path).trajectory()[:, 0]
+    except (RecordingError, OSError, ValueError, KeyError, IndexError):
+        return 0.0
+    return float(t[-1]) if len(t) else 0.0

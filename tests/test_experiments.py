@@ -15,9 +15,9 @@ import yaml
 from scipy import stats
 
 from learner.stats import compare, hedges_g, verdict
-from mission.experiments import campaign, definitions, report
-from mission.experiments.definitions import EXPERIMENTS, Flight, Trial, plan
-from mission.experiments.missions import OBSTACLE_TARGETS, make_mission
+from mission.campaigns.experiments import campaign, definitions, report
+from mission.campaigns.experiments.definitions import EXPERIMENTS, Flight, Trial, plan
+from mission.campaigns.experiments.missions import OBSTACLE_TARGETS, make_mission
 from simbridge.world import resolve_world_path
 
 
@@ -167,7 +167,7 @@ def test_a_killed_campaign_resumes_where_it_stopped(
     assert _deterministic(results[TINY[1].id]) == _deterministic(pool_results[TINY[1].id])
     recordings = list((tmp_path / "recordings").glob("*.rrd"))
     assert [r.name for r in recordings] == [TINY[1].id.replace("/", "_") + "_0.rrd"]
-    from autopilot.recording import read_recording
+    from learner.flightlogs.recording import read_recording
 
     z = read_recording(recordings[0]).trajectory()
     assert len(z) > 1000

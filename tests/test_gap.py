@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 import yaml
 
-from learner.gap.logs import read_log
-from mission.cli import main
-from mission.gap_bench import CASES, run_case
+from learner.flightlogs.readers import read_log
+from mission.campaigns.gap_bench import CASES, run_case
+from mission.cli.main import main
 
 
 @pytest.fixture(scope="module")

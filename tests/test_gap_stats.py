@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from learner.flightlogs.flightlog import FlightLog, write_log
+from learner.flightlogs.readers import read_log
+from learner.flightlogs.tables import ColumnMapping
 from learner.gap.geometry import height_below_m, wall_distances_m
-from learner.gap.logs import ColumnMapping, FlightLog, read_log, write_log
 from learner.gap.stats import (
     benjamini_hochberg,
     bootstrap_mean,

@@ -25,8 +25,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from autopilot.mission_items import NAV_WAYPOINT, Home, item_at
 from autopilot.mission_protocol import item_from_message, item_message
 from mission.fly import gcs_autopilot_command
-from mission.formats import load_mission_file
 from mission.gcs_client import GroundStation, GroundStationError
+from mission.plans.formats import load_mission_file
 from simbridge.launch import finish, start_sim
 from simbridge.world import load_world
 from tests.helpers import REPO

@@ -17,7 +17,7 @@ from learner.network import (
     import_weights,
 )
 from learner.plots import near_ground_error
-from mission.trials import evaluate_models
+from mission.campaigns.trials import evaluate_models
 from simbridge.config import ConfigError
 from simbridge.vehicle import load_vehicle
 from tests.helpers import run_groundfx

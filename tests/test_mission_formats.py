@@ -26,9 +26,9 @@ from autopilot.mission_items import (
     local_offset,
     speed_item,
 )
-from mission.formats import load_mission_file, save_mission_file
-from mission.plan_doc import MissionDoc, default_home, dege7_to_deg
-from mission.plan_yaml import yaml_form
+from mission.plans.doc import MissionDoc, default_home, dege7_to_deg
+from mission.plans.formats import load_mission_file, save_mission_file
+from mission.plans.yaml_plan import yaml_form
 from simbridge.config import ConfigError
 from simbridge.hil import mavlink as mav
 from tests.helpers import REPO, run_groundfx

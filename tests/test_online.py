@@ -254,9 +254,9 @@ def test_online_parameters_have_ranges_and_the_options_clear_errors(tmp_path):
 def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_paused(tmp_path):
     import yaml
 
-    from autopilot.recording import read_recording
+    from learner.flightlogs.recording import read_recording
+    from mission.campaigns.trials import landing_trial
     from mission.fly import fly
-    from mission.trials import landing_trial
 
     data, start = landing_trial(0)
     data["waypoints"][-1]["hold_s"] = 3.0
@@ -305,8 +305,8 @@ def test_a_ground_station_flight_learns_in_the_learner_process():
     """Through a ground station (pymavlink uploads, arms, starts) the learner runs
     asynchronously in its own process: it learns during the lockstep flight at full speed,
     adapts the rho1 network in the rho 2 world, and stops with the flight."""
+    from mission.campaigns.online_bench import BENCH_MISSION
     from mission.fly import fly
-    from mission.online_bench import BENCH_MISSION
 
     summary = fly(
         BENCH_MISSION,
@@ -333,7 +333,7 @@ def test_a_protecting_method_adapts_to_rho2_and_forgets_less_than_naive(tmp_path
     there; carried back to rho = 1 (learning off), the one `replay` adapted has kept what
     the offline network knew far from the ground, where rho 1 and rho 2 agree, and the one
     `naive` adapted has lost it (judged along the offline network's own rho 1 flight)."""
-    from mission.online_eval import far_error_n, hold_error, trial_file, world_file
+    from mission.campaigns.online_eval import far_error_n, hold_error, trial_file, world_file
 
     mission, start = trial_file(tmp_path, 0, 10.0)
     rho2, rho1 = world_file(tmp_path, 2.0), world_file(tmp_path, 1.0)

@@ -1,4 +1,5 @@
-"""Flight recordings: written by the autopilot, read back with `autopilot.recording`, reviewed."""
+"""Flight recordings: written by the autopilot, read back with
+`learner.flightlogs.recording`, reviewed."""
 
 from __future__ import annotations
 
@@ -18,8 +19,9 @@ import pytest
 
 from autopilot.flight_recorder import FlightRecorder
 from autopilot.mission_items import Home, plan_steps
-from autopilot.recorder import RecordOptions
-from autopilot.recording import (
+from autopilot.record_options import RecordOptions
+from autopilot.runner import MODES
+from learner.flightlogs.recording import (
     ENTITY_PATHS,
     MISSION_PATH,
     OBSTACLES,
@@ -27,13 +29,12 @@ from autopilot.recording import (
     WAYPOINTS,
     read_recording,
 )
-from autopilot.runner import MODES
 from mission.fly import autopilot_command
-from mission.formats import load_mission_file
+from mission.plans.formats import load_mission_file
 from mission.recordings import LOGS_ENV
 from simbridge.launch import finish, start_sim
 from simbridge.vehicle import load_vehicle
-from tests.helpers import REPO, run_groundfx
+from tests.helpers import REPO, recorded_s, run_groundfx, wait_for
 
 EXAMPLES = REPO / "mission" / "examples"
 
@@ -152,8 +153,7 @@ def test_a_killed_autopilot_leaves_a_recording_up_to_shortly_before_the_kill(tmp
         stderr=subprocess.PIPE,
     )
     try:
-        time.sleep(4.0)  # starting, then flying in real time
-        assert autopilot.poll() is None
+        wait_for(lambda: recorded_s(path) >= 1.5, "1.5 s of flight recorded", autopilot)
         autopilot.send_signal(signal.SIGKILL)
         autopilot.communicate(timeout=10)
         line = finish(sim)  # the simulator's account: how far the flight got

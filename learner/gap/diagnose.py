@@ -9,10 +9,10 @@ from typing import Any
 
 import numpy as np
 
+from learner.flightlogs.flightlog import FlightLog
 from learner.gap import fit as gapfit
 from learner.gap.candidates import CANDIDATES, Values, nominal_values
 from learner.gap.flightdata import FlightData, prepare
-from learner.gap.logs import FlightLog
 from learner.gap.regimes import REGIMES, RegimeBin, regime_table, regime_variables, rules
 from learner.gap.residual import force_gap_ms, residual_n
 from learner.gap.rollout import HORIZON_S, rms, rollout_errors, shrink

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import savgol_filter
 
+from learner.flightlogs.flightlog import FlightLog
 from learner.gap.geometry import distance_above_m, height_below_m, wall_distances_m
-from learner.gap.logs import FlightLog
 from simbridge import frames
 from simbridge.effects.proximity import WallEffectParams
 from simbridge.vehicle import Vehicle

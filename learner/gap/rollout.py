@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from learner.flightlogs.flightlog import FlightLog
 from learner.gap.candidates import Values, world_force
 from learner.gap.flightdata import FlightData
-from learner.gap.logs import FlightLog
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
 HORIZON_S = 0.5

@@ -1,0 +1,140 @@
+"""Flights for the gap diagnosis: seeded missions, "real" flights flown through `fly` in a
+world holding effects the diagnosis is not told (written as noisy logs, cached), and the
+closed-loop replays of held-out missions in the nominal and corrected worlds."""
+
+from __future__ import annotations
+
+import random
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from learner.flightlogs.flightlog import FlightLog, add_noise, write_log
+from learner.flightlogs.readers import read_log
+from mission.fly import fly
+
+# The documented sensor noise of bench logs (standard deviations, white): a motion-capture
+# pose, an IMU and ESC speed readings of a nano quadrotor.
+BENCH_NOISE: dict[str, float] = {
+    "position_m": 0.001,
+    "velocity_m_s": 0.01,
+    "attitude_rad": 0.003,
+    "rates_rad_s": 0.02,
+    "rotor_rad_s": 0.0,  # commands: the autopilot knows what it sent
+    "accel_m_s2": 0.1,
+}
+# A bench mission lasts 15-30 simulated seconds; one still flying after this failed (it is a
+# figure of the bench, not a hang) unless it was landing: in a ground effect much stronger
+# than the autopilot's model, the vehicle sinks ever slower onto a cushion a few mm above its
+# touchdown height (rho 2.5 against the model's 1: 21 mm after 75 s of landing).
+MAX_FLIGHT_S = 60.0
+KINDS = ("mixed", "hover", "aggressive", "wall")
+
+
+def bench_mission(kind: str, seed: int) -> dict[str, Any]:
+    """A short seeded mission. `mixed`: cruising at 1 m/s at several heights and a low pass
+    at 4 cm; `hover`: holds at 0.5 m and 6 cm; `aggressive`: long legs at 2.5 m/s;
+    `wall`: like mixed, but passing close to a wall at y = 0.6 m."""
+    if kind not in KINDS:
+        raise ValueError(f"mission kind {kind!r}: expected one of {', '.join(KINDS)}")
+    rng = random.Random(f"{kind}-{seed}")
+    if kind == "hover":
+        x, y = rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3)
+        wps = [
+            {"position_m": [x, y, 0.5], "hold_s": 3.0},
+            {"position_m": [x, y, 0.06], "hold_s": 2.0, "acceptance_radius_m": 0.02,
+             "timeout_s": 4.0},
+        ]  # fmt: skip
+        return {"name": f"hover {seed}", "takeoff_altitude_m": 0.5, "waypoints": wps, "land": True}
+    # the position loop's speed is about half the distance to go: far waypoints, passed
+    # through with a wide acceptance radius, keep it cruising
+    reach, speed, accept = (2.5, 3.0, 0.6) if kind == "aggressive" else (1.5, 1.5, 0.4)
+    wps = []
+    for i in range(3):
+        sign = 1.0 if i % 2 == 0 else -1.0
+        wps.append(
+            {
+                "position_m": [
+                    sign * rng.uniform(0.5 * reach, reach),
+                    rng.uniform(-reach, reach),
+                    rng.uniform(0.25, 0.8),
+                ],
+                "hold_s": 0.0,
+                "acceptance_radius_m": accept,
+                "speed_m_s": speed,
+            }
+        )
+    if kind == "wall":  # the wall stands at y = 0.6 m: every other waypoint on this side
+        for wp in wps:
+            wp["position_m"][1] = min(wp["position_m"][1], 0.3)
+        wps[1] = {"position_m": [rng.uniform(-0.5, 0.5), 0.45, 0.5], "hold_s": 1.5,
+                  "acceptance_radius_m": 0.05, "speed_m_s": 0.5}  # fmt: skip
+    x, y = rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3)
+    wps.append(
+        {"position_m": [x, y, 0.04], "hold_s": 1.0, "acceptance_radius_m": 0.02, "timeout_s": 3.0}
+    )
+    return {"name": f"{kind} {seed}", "takeoff_altitude_m": 0.3, "waypoints": wps, "land": True}
+
+
+def fly_log(
+    mission: dict[str, Any] | Path,
+    world: Path,
+    out: Path,
+    model: str = "analytic",
+    max_flight_s: float = MAX_FLIGHT_S,
+    record: bool = False,
+) -> Path:
+    """Fly `mission` in `world` through `fly` (simulator and autopilot processes in lockstep,
+    the autopilot arming by itself) and keep its flight log at `out` (reused if present);
+    `record`: its rerun recording too, beside it (.rrd)."""
+    if out.exists():
+        return out
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if isinstance(mission, Path):
+        path = mission
+    else:
+        path = out.with_suffix(".mission.yaml")
+        path.write_text(yaml.safe_dump(mission))
+    raw, track = out.with_suffix(".clean.csv"), out.with_suffix(".track.npz")
+    summary = fly(path, str(world), model, rho=1.0, via_gcs=False, flight_log=raw,
+                  record=out.with_suffix(".rrd") if record else False,
+                  max_flight_s=max_flight_s, trajectory=track)  # fmt: skip
+    if not summary.get("landed") and not _ended_landing(track):
+        raise RuntimeError(f"{out.name}: the flight did not land ({summary.get('ended')})")
+    if not raw.exists():
+        raise RuntimeError(f"{out.name}: the flight wrote no log ({summary.get('ended')})")
+    raw.replace(out)
+    out.with_suffix(".clean.json").replace(out.with_suffix(".json"))
+    return out
+
+
+def _ended_landing(track: Path) -> bool:
+    """The flight's last step was in the landing phase (its trajectory file)."""
+    import numpy as np
+
+    from autopilot.runner import MODES
+
+    if not track.exists():
+        return False
+    with np.load(track) as data:
+        columns, log = list(data["columns"]), data["log"]
+    return len(log) > 0 and log[-1, columns.index("mode")] == MODES.index("landing")
+
+
+def real_log(
+    mission: dict[str, Any],
+    world: Path,
+    out: Path,
+    noise: dict[str, float],
+    seed: int,
+    record: bool = False,
+) -> Path:
+    """A "real" flight: flown in the withheld world, written with sensor noise; cached. The
+    clean flight is kept beside it (.truth.csv; `record`: also .truth.rrd)."""
+    if out.exists():
+        return out
+    clean = fly_log(mission, world, out.with_suffix(".truth.csv"), record=record)
+    log = read_log(clean)
+    noisy: FlightLog = add_noise(log, noise, seed)
+    return write_log(noisy, out)

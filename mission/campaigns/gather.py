@@ -1,0 +1,94 @@
+"""`groundfx learn gather`: the expert (the analytic model with the true rho) flies the thesis's
+random waypoints in a simulator process, recording 100 Hz learning samples."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import yaml
+from tqdm import tqdm
+
+from autopilot.mission_items import Home, waypoint_items
+from autopilot.params import MODEL_NAMES, ParamStore
+from autopilot.runner import AutopilotConfig, fly_mission
+from learner.dataset import save_dataset
+from mission.campaigns.sampling import thesis_waypoints
+from simbridge.effects.ground import GroundEffectParams
+from simbridge.launch import finish, start_sim
+from simbridge.physics import with_effects
+from simbridge.vehicle import load_vehicle
+from simbridge.world import load_world, resolve_world_path
+
+SAMPLE_HZ = 100.0
+
+
+def gather(
+    rho: float, samples: int, seed: int, out: Path, world: str = "default", progress: bool = True
+) -> Path:
+    base = load_world(world)
+    world_obj = with_effects(base, ground_effect=GroundEffectParams(rho=rho))
+    # the simulator reads a file: write the world with rho_sim = rho beside the dataset
+    world_path = out.with_suffix(".world.yaml")
+    world_path.parent.mkdir(parents=True, exist_ok=True)
+    world_path.write_text(world_yaml_with_rho(resolve_world_path(world).read_text(), rho))
+    vehicle = load_vehicle(world_obj.vehicle)
+    # about one waypoint per 1.5 s of flight: plenty for the samples asked
+    o = world_obj.origin
+    origin = (o.lat_deg, o.lon_deg, o.alt_m)
+    waypoints = thesis_waypoints(seed, samples // 100 + 20)
+    mission = waypoint_items(waypoints, 0.3, False, Home(*origin))
+    params = ParamStore(
+        None,
+        {
+            "GFX_GE_MODEL": MODEL_NAMES.index("analytic"),
+            "GFX_GE_RHO": rho,
+            "GFX_WP_TIMEOUT": max(w.timeout_s or 0.0 for w in waypoints),
+        },
+    )
+    bar = tqdm(total=samples, unit="sample", desc=f"gather rho={rho:g}", disable=not progress)
+    counted = [0]
+
+    def on_sample(n: int) -> None:
+        bar.update(n - counted[0])
+        counted[0] = n
+
+    sim, port = start_sim(world_path, speedup="max")
+    config = AutopilotConfig(
+        sim_url=f"tcp:127.0.0.1:{port}",
+        vehicle=vehicle,
+        params=params,
+        origin=origin,
+        mission=mission,
+        auto_start=True,
+        record_hz=SAMPLE_HZ,
+        stop_after_samples=samples,
+        on_sample=on_sample,
+        max_flight_s=samples / SAMPLE_HZ * 3 + 60,
+    )
+    try:
+        flight = fly_mission(config)
+    finally:
+        bar.close()
+        finish(sim)
+    if flight.samples is None or len(flight.samples) < samples:
+        got = 0 if flight.samples is None else len(flight.samples)
+        raise RuntimeError(f"the flight ended ({flight.ended}) after {got} of {samples} samples")
+    meta = {
+        "rho": rho,
+        "seed": seed,
+        "samples": len(flight.samples),
+        "sample_hz": SAMPLE_HZ,
+        "vehicle": dataclasses.asdict(vehicle),
+        "world": str(resolve_world_path(world)),
+        "expert": f"analytic rho={rho:g}",
+    }
+    return save_dataset(out, flight.samples, meta)
+
+
+def world_yaml_with_rho(world_yaml: str, rho: float) -> str:
+    """The world file's text with its ground-effect rho replaced (or a ground effect added)."""
+    data = yaml.safe_load(world_yaml)
+    effects = [e for e in data.get("effects") or [] if e.get("name") != "ground_effect"]
+    data["effects"] = [{"name": "ground_effect", "rho": rho}, *effects]
+    return yaml.safe_dump(data)

@@ -1,0 +1,62 @@
+"""`groundfx bench online`: does the learner thread disturb the control loop?
+
+The offline rho1 network flies `low_hover` in its own world (rho 1), in lockstep as fast as
+it goes, with the learner off and on (asynchronous: the learner process updates at full
+rate, every 64 samples, while the control loop runs). Its own world, so that learning
+barely changes the trajectory: in a world it must adapt to, the learning flight flies a
+different path (nearer the ground, shorter), and the figures would compare two flights
+rather than the learner's cost. Pairs alternate so that load from elsewhere falls on
+both; the figures are medians over the pairs. Targets (issue 6): p99 controller step latency
+at most 20 % higher, real-time factor at least 80 % of learner-off.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from mission import EXAMPLES_DIR
+from mission.fly import fly
+
+BENCH_MISSION = EXAMPLES_DIR / "low_hover.yaml"
+
+
+def bench_online(method: str = "naive", repeat: int = 3, world: str = "default") -> dict[str, Any]:
+    runs: dict[str, list[dict[str, Any]]] = {"off": [], "on": []}
+    for _ in range(repeat):
+        for kind in ("off", "on"):
+            extra = () if kind == "off" else ("--online", method, "--online-async")
+            runs[kind].append(
+                fly(
+                    BENCH_MISSION,
+                    world,
+                    "neural",
+                    network="rho1",
+                    via_gcs=False,
+                    record=False,
+                    autopilot_options=extra,
+                )
+            )
+
+    def median(kind: str, key: str) -> float:
+        return float(np.median([r[key] for r in runs[kind]]))
+
+    out: dict[str, Any] = {
+        "mission": str(BENCH_MISSION),
+        "world": world,
+        "method": method,
+        "pairs": repeat,
+    }
+    for kind in ("off", "on"):
+        for key in ("controller_us_p50", "controller_us_p99", "rtf", "sim_s"):
+            out[f"{key}_{kind}"] = median(kind, key)
+    out["p99_ratio"] = out["controller_us_p99_on"] / out["controller_us_p99_off"]
+    out["rtf_ratio"] = out["rtf_on"] / out["rtf_off"]
+    on = runs["on"]
+    out["online_updates"] = [r.get("online_updates") for r in on]
+    out["online_dropped"] = [r.get("online_dropped") for r in on]
+    out["online_version"] = [r.get("online_version") for r in on]
+    out["meets_p99_target"] = out["p99_ratio"] <= 1.2
+    out["meets_rtf_target"] = out["rtf_ratio"] >= 0.8
+    return out

@@ -1,0 +1,249 @@
+"""`groundfx learn online-eval`: thesis experiments 4.3 (adaptation) and 4.4 (remembering).
+
+Protocol. A network trained offline at rho = 1 flies seeded landing trials
+(mission/campaigns/trials.py) whose hold 3 cm above the ground lasts `hold_s` (default 10 s
+instead of 6 s: an update needs 64 samples, 0.64 s, and the error is taken over the settled
+second half of the hold, so the first half is the adaptation time). Every condition flies
+the same missions from the same starts: offline-only (the network, no learning), analytic
+with the true rho (the expert) and each online method (deterministic updates, so a trial is
+reproducible).
+
+- 4.3, per world rho_sim (2 and 0.5): mean and 95% CI of the hold z RMS error per
+  condition, and the share of the gap between offline-only and analytic each method closes.
+- 4.4: each method's network as adapted at the end of its rho = 2 trial (saved with
+  --save-model) flies the same trial again at rho = 1 without learning. Forgetting is its
+  error against the offline-only network's at rho = 1, twice: the hold error of its own
+  flight, and its ground-effect error at least 0.5 m above the ground along the offline-only
+  network's flight of the same trial, where the two worlds agree.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from autopilot.metrics import FAR_FROM_GROUND_M
+from learner.flightlogs.readers import read_log
+from learner.model import load_model
+from learner.online.names import METHODS, PROTECTING
+from learner.stats import gap_closed, mean_ci95
+from mission.campaigns.gather import world_yaml_with_rho
+from mission.campaigns.trials import landing_trial
+from mission.fly import fly
+from simbridge.effects.ground import cutoff_height_m, thrust_gain_array
+from simbridge.vehicle import load_vehicle
+from simbridge.world import load_world, resolve_world_path
+
+DEFAULT_HOLD_S = 10.0
+SAME_M = 1e-5  # 0.01 mm: hold errors closer than this are the same
+MAX_FLIGHT_S = 240.0  # a trial lasts 30-80 s simulated; one that floats longer has failed
+
+
+def trial_file(directory: Path, seed: int, hold_s: float) -> tuple[Path, str]:
+    mission, start = landing_trial(seed)
+    mission["waypoints"][-1]["hold_s"] = hold_s
+    path = directory / f"trial_{seed}.yaml"
+    path.write_text(yaml.safe_dump(mission))
+    return path, start
+
+
+def world_file(directory: Path, rho: float) -> Path:
+    path = directory / f"world_rho{rho:g}.yaml"
+    path.write_text(world_yaml_with_rho(resolve_world_path("default").read_text(), rho))
+    return path
+
+
+def hold_error(
+    mission: Path,
+    start: str,
+    world: Path,
+    model: str,
+    rho: float,
+    network: str | None,
+    *extra: str,
+    flight_log: Path | None = None,
+) -> float:
+    summary = fly(
+        mission,
+        str(world),
+        model,
+        rho=rho,
+        start=start,
+        network=network,
+        via_gcs=False,
+        record=False,
+        max_flight_s=MAX_FLIGHT_S,
+        flight_log=flight_log,
+        autopilot_options=extra,
+    )
+    error = summary.get("hold_z_rms_error_m")
+    # a trial that never held near the ground counts as the whole hold height, not as perfect
+    return float(error) if error is not None else 0.03
+
+
+def far_error_n(flight_log: Path, network: str | Path, world: Path, rho: float) -> float:
+    """RMS error [N] of `network`'s vertical ground effect over the steps of a logged flight
+    at least FAR_FROM_GROUND_M above the (flat) ground, against equation 3.4 of the world.
+    Up there rho 1 and rho 2 agree to a fraction of a millinewton, so what a network adapted
+    at rho 2 gets wrong there is knowledge lost, not knowledge changed."""
+    vehicle = load_vehicle(load_world(str(world)).vehicle)
+    log = read_log(flight_log)
+    height = log.position_m[:, 2]
+    far = height >= FAR_FROM_GROUND_M
+    if not far.any():
+        return float("nan")  # the flight never got that high
+    n = log.rotor_speeds_rad_s[far]
+    features = np.column_stack([height[far], log.velocity_m_s[far], log.quaternion[far], n])
+    radius = vehicle.rotor_radius_m
+    gain = thrust_gain_array(height[far], rho, radius, cutoff_height_m(rho, radius))
+    true_n = vehicle.thrust_coefficient_n_s2 * np.sum(n * n, axis=1) * gain
+    predicted_n = load_model(network).predict_batch(features)[:, 2]
+    return float(np.sqrt(np.mean((predicted_n - true_n) ** 2)))
+
+
+def run_online_eval(
+    seeds: list[int],
+    methods: tuple[str, ...] = METHODS,
+    rhos: tuple[float, ...] = (2.0, 0.5),
+    network: str = "rho1",
+    hold_s: float = DEFAULT_HOLD_S,
+    remember: bool = True,
+    params: tuple[str, ...] = (),
+    say: Callable[[str], None] = print,
+    workers: int = 1,
+) -> dict[str, Any]:
+    results: dict[str, Any] = {"seeds": seeds, "hold_s": hold_s, "network": network}
+    extra = tuple(a for p in params for a in ("--param", p))
+    # each flight is its own simulator and autopilot processes: threads only wait on them
+    pool = ThreadPoolExecutor(max_workers=workers)
+
+    def errors_of(calls: Sequence[tuple[Any, ...]]) -> np.ndarray:
+        return np.array(list(pool.map(lambda c: hold_error(*c), calls)))
+
+    def logged_errors_of(calls: Sequence[tuple[tuple[Any, ...], Path]]) -> np.ndarray:
+        return np.array(list(pool.map(lambda c: hold_error(*c[0], flight_log=c[1]), calls)))
+
+    with pool, tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        trials = [trial_file(d, seed, hold_s) for seed in seeds]
+        adapted: dict[str, list[Path]] = {m: [] for m in methods}
+        for rho in rhos:
+            world = world_file(d, rho)
+            errors: dict[str, np.ndarray] = {}
+            conditions = [("offline", "neural", ()), ("analytic", "analytic", ())]
+            conditions += [(m, "neural", ("--online", m, *extra)) for m in methods]
+            for name, model, options in conditions:
+                calls = []
+                for (mission, start), seed in zip(trials, seeds, strict=True):
+                    save: tuple[str, ...] = ()
+                    if remember and rho == 2.0 and name in methods:
+                        path = d / f"{name}_{seed}.npz"
+                        adapted[name].append(path)
+                        save = ("--save-model", str(path))
+                    net = None if model == "analytic" else network
+                    calls.append((mission, start, world, model, rho, net, *options, *save))
+                errors[name] = errors_of(calls)
+                _say_row(say, f"rho_sim {rho:g}", name, errors[name])
+            gaps = {
+                m: gap_closed(errors["offline"], errors["analytic"], errors[m]) for m in methods
+            }
+            say(
+                f"rho_sim {rho:g}: gap closed (offline -> analytic): "
+                + ", ".join(f"{m} {g * 100:.0f}%" for m, g in gaps.items())
+            )
+            results[f"rho{rho:g}"] = {
+                "errors_m": {k: v.tolist() for k, v in errors.items()},
+                "gap_closed": gaps,
+            }
+        if remember and 2.0 in rhos:
+            results["remember"] = _remember(
+                d, trials, methods, network, adapted, say, errors_of, logged_errors_of
+            )
+    return results
+
+
+def _remember(
+    d: Path,
+    trials: list[tuple[Path, str]],
+    methods: tuple[str, ...],
+    network: str,
+    adapted: dict[str, list[Path]],
+    say: Callable[[str], None],
+    errors_of: Callable[[Sequence[tuple[Any, ...]]], np.ndarray],
+    logged_errors_of: Callable[[Sequence[tuple[tuple[Any, ...], Path]]], np.ndarray],
+) -> dict[str, Any]:
+    """4.4: back at rho = 1 with the networks adapted at rho = 2, learning off. Two errors
+    against offline-only: the hold error of the network's own flight (near the ground rho 1
+    and rho 2 ask different forces of the same inputs, so a network that adapted must be
+    wrong at one of them), and its ground-effect error at least FAR_FROM_GROUND_M up along
+    the offline-only network's flight of the same trial (where the worlds agree, so any
+    error is knowledge lost)."""
+    world = world_file(d, 1.0)
+    logs = [d / f"offline_rho1_{k}.csv" for k in range(len(trials))]
+    offline = logged_errors_of(
+        [
+            ((m, s, world, "neural", 1.0, network), log)
+            for (m, s), log in zip(trials, logs, strict=True)
+        ]
+    )
+    _say_row(say, "rho_sim 1 again", "offline", offline)
+    offline_far = np.array([far_error_n(log, network, world, 1.0) for log in logs])
+    out: dict[str, Any] = {
+        "offline_m": offline.tolist(),
+        "offline_far_n": offline_far.tolist(),
+        "forgetting_m": {},
+        "far_error_n": {},
+    }
+    for method in methods:
+        errors = errors_of(
+            [
+                (m, s, world, "neural", 1.0, str(path))
+                for (m, s), path in zip(trials, adapted[method], strict=True)
+            ]
+        )
+        _say_row(say, "rho_sim 1 again", method, errors)
+        out["forgetting_m"][method] = (errors - offline).tolist()
+        out["far_error_n"][method] = [
+            far_error_n(log, path, world, 1.0)
+            for log, path in zip(logs, adapted[method], strict=True)
+        ]
+    forgot = {m: float(np.mean(v)) for m, v in out["forgetting_m"].items()}
+    say(
+        "forgetting at the hold (error at rho 1 after adapting to rho 2, minus offline-only): "
+        + ", ".join(f"{m} {v * 1000:+.2f} mm" for m, v in forgot.items())
+    )
+    far = {"offline": offline_far, **{m: np.array(v) for m, v in out["far_error_n"].items()}}
+    for name, errors_n in far.items():
+        mean, lo, hi = mean_ci95(errors_n)
+        say(
+            f"rho_sim 1 again  {name:10s} ground-effect error >= {FAR_FROM_GROUND_M:g} m "
+            f"{mean * 1000:7.2f} mN (95% CI {lo * 1000:.2f} to {hi * 1000:.2f})"
+        )
+    if "naive" in forgot:
+        # by more than a rounding: equal networks (all sat down) are not "less"
+        better = [m for m in PROTECTING if m in forgot and forgot[m] < forgot["naive"] - SAME_M]
+        say(f"protecting methods that forget less than naive at the hold: {_names(better)}")
+        out["forget_less_at_hold"] = better
+        mean_far = {m: float(np.mean(v)) for m, v in far.items()}
+        better = [m for m in PROTECTING if m in mean_far and mean_far[m] < mean_far["naive"]]
+        say(f"protecting methods that forget less than naive far from the ground: {_names(better)}")
+        out["forget_less_far"] = better
+    return out
+
+
+def _names(names: list[str]) -> str:
+    return ", ".join(names) or "none"
+
+
+def _say_row(say: Callable[[str], None], where: str, name: str, errors: np.ndarray) -> None:
+    mean, lo, hi = mean_ci95(errors)
+    say(
+        f"{where:16s} {name:10s} hold z RMS error {mean * 1000:6.2f} mm "
+        f"(95% CI {lo * 1000:.2f} to {hi * 1000:.2f}, n = {len(errors)})"
+    )

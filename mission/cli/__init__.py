@@ -1,0 +1,1 @@
+"""The `groundfx` command line: `main` builds the parser; one module per subcommand family."""

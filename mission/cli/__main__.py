@@ -1,0 +1,5 @@
+import sys
+
+from mission.cli.main import main
+
+sys.exit(main())

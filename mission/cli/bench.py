@@ -1,0 +1,91 @@
+"""`groundfx bench sim|model|online|sitl`: benchmarks that print figures."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from learner.online.names import METHODS
+from simbridge.config import ConfigError
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser("bench", help="benchmarks that print figures")
+    bench_sub = p.add_subparsers(dest="target", required=True, metavar="TARGET")
+    b = bench_sub.add_parser("sim", help="physics and lockstep real-time factors")
+    b.add_argument("--world", default="default")
+    b.add_argument(
+        "--seconds", type=float, default=20.0, help="simulated seconds per figure (default: 20)"
+    )
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.add_argument("--out", type=Path, help="also write the JSON to this file")
+    b.set_defaults(func=cmd_bench)
+
+    b = bench_sub.add_parser("model", help="the ground-effect network's inference time")
+    b.add_argument("--network", default="rho2", help="model file or packaged name")
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(func=cmd_bench)
+    b = bench_sub.add_parser("online", help="controller latency and rtf, learner off and on")
+    b.add_argument(
+        "--method", default="naive", choices=METHODS, help="online method (default: naive)"
+    )
+    b.add_argument("--repeat", type=int, default=3, help="off/on pairs (default: 3)")
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(func=cmd_bench)
+    b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")
+    b.add_argument("--world", default="default")
+    b.add_argument(
+        "--repeat", type=int, default=3, help="flights with recording off and on each (default: 3)"
+    )
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(func=cmd_bench)
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    if args.target == "model":
+        from learner.bench import bench_model
+
+        result = bench_model(args.network)
+        print(
+            json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
+        )
+        return 0
+    if args.target == "online":
+        from mission.campaigns.online_bench import bench_online
+
+        if args.repeat < 1:
+            raise ConfigError(f"--repeat: {args.repeat} must be at least 1")
+        result = bench_online(args.method, args.repeat)
+        print(
+            json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
+        )
+        return 0
+    if args.target == "sitl":
+        from mission.campaigns.bench import bench_sitl
+
+        result = bench_sitl(args.world, args.repeat)
+        print(
+            json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
+        )
+        return 0
+    from simbridge.bench import bench_sim
+
+    result = bench_sim(args.world, args.seconds)
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(result, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(
+            f"physics:  {result['physics_rtf']:.1f}x real time "
+            f"({result['physics_us_per_step']:.1f} us per {result['physics_hz']} Hz step, "
+            f"effects: {', '.join(result['effects']) or 'none'})"
+        )
+        print(
+            f"lockstep: {result['lockstep_rtf']:.1f}x real time "
+            f"({result['lockstep_us_per_step']:.0f} us per {result['control_hz']} Hz round trip)"
+        )
+    return 0

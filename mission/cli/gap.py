@@ -1,0 +1,67 @@
+"""`groundfx gap diagnose|bench`: the sim-to-real gap diagnosis on flight logs, and its blind
+check on "real" flights flown in worlds holding effects the diagnosis is not told."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from simbridge.config import ConfigError
+
+
+def add_parser(sub: Any) -> None:
+    g = sub.add_parser("gap", help="sim-to-real gap diagnosis").add_subparsers(
+        dest="gap_command", required=True
+    )
+    d = g.add_parser("diagnose", help="residuals, effects and a corrected world from flight logs")
+    d.add_argument("logs", type=Path, nargs="+", help="flight logs (.csv, .parquet, .rrd)")
+    d.add_argument("--world", required=True, help="the nominal world (YAML or packaged name)")
+    d.add_argument("--holdout", type=Path, nargs="+", default=[], help="logs to score only")
+    d.add_argument("--folds", type=int, default=3, help="cross-validation folds over flights")
+    d.add_argument("--columns", type=Path, help="column mapping YAML for other vehicles' logs")
+    d.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
+    d.add_argument("--no-replay", action="store_true", help="skip the closed-loop re-flights")
+    d.add_argument("--out", type=Path, required=True, help="output folder")
+    d.set_defaults(func=cmd_diagnose)
+    b = g.add_parser("bench", help="the diagnosis, scored on flights with withheld effects")
+    b.add_argument("--out", type=Path, required=True, help="output folder (flights are cached)")
+    b.add_argument("--cases", help="comma-separated case names (default: all)")
+    b.add_argument(
+        "--replay", action="store_true",
+        help="also fly each held-out mission again in the nominal and corrected worlds",
+    )  # fmt: skip
+    b.add_argument("--json", action="store_true", help="print the scores as one JSON object")
+    b.set_defaults(func=cmd_bench)
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    from mission.campaigns.gap_diagnosis import run_diagnosis
+
+    result = run_diagnosis(
+        args.logs, args.holdout, args.world, args.out, args.folds, args.columns, args.vehicle,
+        not args.no_replay,
+    )  # fmt: skip
+    for effect, e in result["effects"].items():
+        print(f"{effect:20s} {e['status']}")
+    f = result["gap"]["force_rms_n"]
+    print(f"force gap {f['before'] * 1000:.2f} -> {f['after'] * 1000:.2f} mN "
+          f"(shrink {f['shrink'] * 100:.0f}%); report: {args.out / 'report.md'}")  # fmt: skip
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from mission.campaigns.gap_bench import CASES, run_bench, table
+
+    names = args.cases.split(",") if args.cases else list(CASES)
+    unknown = [n for n in names if n not in CASES]
+    if unknown:
+        raise ConfigError(f"--cases: unknown case {unknown[0]!r}; known: {', '.join(CASES)}")
+    wall0 = time.perf_counter()
+    scores = run_bench([CASES[n] for n in names], args.out, args.replay)
+    scores["wall_s"] = time.perf_counter() - wall0
+    (args.out / "bench.json").write_text(json.dumps(scores, indent=1))
+    print(json.dumps(scores) if args.json else table(scores))
+    return 0

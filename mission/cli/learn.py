@@ -1,0 +1,115 @@
+"""`groundfx learn gather|train|evaluate|memory|online-eval|plot`: data, training and
+evaluation of the ground-effect network."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from learner.bounds import DEFAULT_CONTROL_GAIN_BOUND, DEFAULT_LAYER_BOUND
+from mission.cli.online import add_online_learn_parsers
+from mission.cli.options import DEFAULT_LOGS
+from simbridge.config import ConfigError
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser("learn", help="gather data, train the ground-effect network, plot it")
+    learn = p.add_subparsers(dest="action", required=True, metavar="ACTION")
+    g = learn.add_parser("gather", help="the expert flies the thesis's random waypoints")
+    g.add_argument("--rho", type=float, required=True, help="rho_sim of the world and the expert")
+    g.add_argument("--samples", type=int, default=10000, help="100 Hz samples (default: 10000)")
+    g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--world", default="default", help="world whose ground effect rho replaces")
+    g.add_argument("--out", type=Path, required=True, help="dataset file (.npz)")
+    g.set_defaults(func=cmd_learn)
+    t = learn.add_parser("train", help="offline training")
+    t.add_argument("data", type=Path, nargs="+", help="dataset files")
+    t.add_argument("--out", type=Path, required=True, help="model file (.npz)")
+    t.add_argument("--max-epochs", type=int, default=1000)
+    t.add_argument(
+        "--layer-bound",
+        type=float,
+        default=DEFAULT_LAYER_BOUND,
+        help=f"spectral norm bound per layer (default: {DEFAULT_LAYER_BOUND:g})",
+    )
+    t.add_argument(
+        "--control-gain-bound",
+        type=float,
+        default=DEFAULT_CONTROL_GAIN_BOUND,
+        help="bound on |d f_ge / d thrust| near hover, N/N, through the rotor-speed inputs "
+        f"(Neural Lander's stability condition; 0: none; default: {DEFAULT_CONTROL_GAIN_BOUND:g})",
+    )
+    t.add_argument("--seed", type=int, default=0)
+    t.set_defaults(func=cmd_learn)
+    e = learn.add_parser("evaluate", help="none, analytic and neural over seeded landing trials")
+    e.add_argument("--world", default="rho2")
+    e.add_argument(
+        "--network", help="model file or packaged name (default: nearest the world's rho)"
+    )
+    e.add_argument("--trials", type=int, default=10)
+    e.add_argument("--seed", type=int, default=0, help="first trial seed")
+    e.add_argument("--json", action="store_true")
+    e.set_defaults(func=cmd_learn)
+    add_online_learn_parsers(learn, cmd_learn)
+    pl = learn.add_parser("plot", help="true against predicted f_ge,z over altitude")
+    pl.add_argument("--network", default="rho1", help="model file or packaged name")
+    pl.add_argument("--rho-list", default="1,2", help="rho values to draw (default: 1,2)")
+    pl.add_argument("--out", type=Path, default=DEFAULT_LOGS / "prediction.png")
+    pl.set_defaults(func=cmd_learn)
+
+
+def cmd_learn(args: argparse.Namespace) -> int:
+    if args.action == "gather":
+        from mission.campaigns.gather import gather
+
+        if not 0 < args.rho <= 50:
+            raise ConfigError(f"--rho: {args.rho:g} is outside the allowed range (0, 50]")
+        if args.samples < 1:
+            raise ConfigError(f"--samples: {args.samples} must be at least 1")
+        print(gather(args.rho, args.samples, args.seed, args.out, args.world))
+        return 0
+    if args.action == "train":
+        from learner.dataset import load_dataset
+        from learner.train import TrainConfig, train, write_outputs
+
+        datasets = [load_dataset(p) for p in args.data]
+        config = TrainConfig(
+            max_epochs=args.max_epochs,
+            seed=args.seed,
+            layer_bound=args.layer_bound,
+            control_gain_bound=args.control_gain_bound,
+        )
+        result = train(datasets, config, sources=[str(p) for p in args.data])
+        paths = write_outputs(result, args.out)
+        m = result.metrics
+        print(
+            f"trained on {m['train_samples']} samples ({m['outliers_dropped']} outliers dropped) "
+            f"in {m['wall_s']:.1f} s, {m['epochs']} epochs; validation RMSE f_ge,z "
+            f"{m['validation_rmse_n']['fge_z'] * 1000:.2f} mN; Lipschitz bound "
+            f"{m['lipschitz_bound']:.2f}; rotor-speed columns {m['control_column_norm']:.4f}"
+        )
+        for kind, path in paths.items():
+            print(f"{kind}: {path}")
+        return 0
+    if args.action in ("memory", "online-eval"):
+        from mission.cli.online import cmd_online_learn
+
+        return cmd_online_learn(args)
+    if args.action == "evaluate":
+        from mission.campaigns.trials import evaluate_models
+
+        result = evaluate_models(
+            list(range(args.seed, args.seed + args.trials)), args.world, args.network
+        )
+        if args.json:
+            print(json.dumps(result))
+        return 0
+    from learner.model import load_model
+    from learner.plots import plot_prediction
+    from simbridge.vehicle import load_vehicle
+
+    rhos = [float(r) for r in args.rho_list.split(",")]
+    print(plot_prediction(load_model(args.network), load_vehicle(), rhos, args.out))
+    return 0

@@ -1,0 +1,155 @@
+"""The command-line side of online learning: `--online METHOD` and its companions for
+`groundfx autopilot` and `groundfx fly` (with a ground station, GFX_OL_METHOD and the other
+GFX_OL_* parameters do the same in flight), and `groundfx learn memory|online-eval`."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from autopilot.params import ONLINE_METHODS
+from learner.online.names import METHODS
+from simbridge.config import ConfigError
+
+
+def add_online_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("online learning")
+    g.add_argument(
+        "--online",
+        choices=METHODS,
+        metavar="METHOD",
+        help=f"adapt the neural model in flight: {', '.join(METHODS)} (parameter GFX_OL_METHOD; "
+        "hyperparameters GFX_OL_LR, GFX_OL_LAMBDA, GFX_OL_MARGIN, GFX_OL_FORGET via --param)",
+    )
+    mode = g.add_mutually_exclusive_group()
+    mode.add_argument(
+        "--online-deterministic",
+        dest="online_deterministic",
+        action="store_true",
+        default=None,
+        help="update inside the control step when a batch completes: the same simulated "
+        "times on every run (default with --auto-start / --no-gcs)",
+    )
+    mode.add_argument(
+        "--online-async",
+        dest="online_deterministic",
+        action="store_false",
+        help="update in the learner thread; the control loop never waits "
+        "(default with a ground station)",
+    )
+    g.add_argument(
+        "--save-model",
+        dest="save_model",
+        type=Path,
+        help="save the adapted network here at the end",
+    )
+
+
+def online_overrides(args: argparse.Namespace) -> dict[str, float]:
+    """--online as the parameter GFX_OL_METHOD."""
+    method = getattr(args, "online", None)
+    if method is None:
+        return {}
+    if getattr(args, "model", None) not in (None, "neural"):
+        raise ConfigError(f"--online {method}: needs --model neural, not --model {args.model}")
+    return {"GFX_OL_METHOD": float(ONLINE_METHODS.index(method))}
+
+
+def online_options(args: argparse.Namespace, reproducible: bool) -> object:
+    """The runner's OnlineOptions: deterministic unless asked otherwise where the flight is
+    reproducible anyway (--auto-start), asynchronous with a ground station."""
+    from autopilot.online_control import OnlineOptions
+
+    deterministic = args.online_deterministic
+    if deterministic is None:
+        deterministic = reproducible
+    return OnlineOptions(deterministic=deterministic, save_path=args.save_model)
+
+
+def pass_through(args: argparse.Namespace) -> list[str]:
+    """The online options again, for the autopilot process that `fly` starts."""
+    out: list[str] = []
+    if getattr(args, "online", None):
+        out += ["--online", args.online]
+    if args.online_deterministic is not None:
+        out.append("--online-deterministic" if args.online_deterministic else "--online-async")
+    if args.save_model is not None:
+        out += ["--save-model", str(args.save_model.resolve())]
+    return out
+
+
+def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) -> None:
+    m = learn.add_parser("memory", help="store offline samples beside a model (ewc, replay)")
+    m.add_argument("data", type=Path, nargs="+", help="the model's offline dataset files")
+    m.add_argument("--out", type=Path, required=True, help="NAME.memory.npz beside NAME.npz")
+    m.add_argument("--samples", type=int, default=2048, help="samples kept (default: 2048)")
+    m.add_argument("--seed", type=int, default=0)
+    m.set_defaults(func=func)
+    e = learn.add_parser(
+        "online-eval", help="thesis experiments 4.3 and 4.4: online methods over seeded trials"
+    )
+    e.add_argument("--trials", type=int, default=10, help="seeded trials per condition")
+    e.add_argument("--seed", type=int, default=0, help="first trial seed")
+    e.add_argument("--methods", default=",".join(METHODS), help="comma-separated methods")
+    e.add_argument("--rho", default="2,0.5", help="rho_sim of the adaptation worlds")
+    e.add_argument("--network", default="rho1", help="the offline network (default: rho1)")
+    e.add_argument("--hold-s", type=float, default=10.0, help="hold 3 cm above ground this long")
+    e.add_argument("--no-remember", action="store_true", help="skip experiment 4.4")
+    e.add_argument(
+        "--workers", type=int, default=None, help="flights at once (default: one per core)"
+    )
+    e.add_argument(
+        "--param", action="append", default=[], metavar="NAME=VALUE", help="e.g. GFX_OL_LR=0.01"
+    )
+    e.add_argument("--json", action="store_true")
+    e.set_defaults(func=func)
+
+
+def cmd_online_learn(args: argparse.Namespace) -> int:
+    if args.action == "memory":
+        from learner.dataset import load_dataset
+        from learner.online.memory import make_memory, save_memory
+
+        if args.samples < 1:
+            raise ConfigError(f"--samples: {args.samples} must be at least 1")
+        memory = make_memory([load_dataset(p) for p in args.data], args.samples, args.seed)
+        memory.header["sources"] = [str(p) for p in args.data]
+        print(save_memory(args.out, memory))
+        return 0
+    import json
+    import os
+
+    from mission.campaigns.online_eval import run_online_eval
+
+    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    for m in methods:
+        if m not in METHODS:
+            raise ConfigError(f"--methods: unknown method {m!r}; choose from {', '.join(METHODS)}")
+    try:
+        rhos = tuple(float(r) for r in args.rho.split(","))
+    except ValueError:
+        raise ConfigError(
+            f"--rho: expected numbers separated by commas, got {args.rho!r}"
+        ) from None
+    if not all(0 < r <= 50 for r in rhos):
+        raise ConfigError(f"--rho: each rho must be in (0, 50], got {args.rho!r}")
+    if args.trials < 1:
+        raise ConfigError(f"--trials: {args.trials} must be at least 1")
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    if not 1 <= workers <= 64:
+        raise ConfigError(f"--workers: {workers} is outside the allowed range [1, 64]")
+    if not 1.0 <= args.hold_s <= 120.0:
+        raise ConfigError(f"--hold-s: {args.hold_s:g} is outside the allowed range [1, 120] s")
+    result = run_online_eval(
+        list(range(args.seed, args.seed + args.trials)),
+        methods,
+        rhos,
+        args.network,
+        args.hold_s,
+        remember=not args.no_remember,
+        params=tuple(args.param),
+        workers=workers,
+    )
+    if args.json:
+        print(json.dumps(result))
+    return 0

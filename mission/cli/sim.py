@@ -1,0 +1,84 @@
+"""`groundfx sim`: the simulated vehicle behind the PX4 simulator protocol."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from typing import Any
+
+from mission.cli.options import port, speedup
+
+
+def terminate(_signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser("sim", help="run the PyBullet drone behind the PX4 simulator protocol (TCP)")
+    p.add_argument(
+        "--world", default="default", help="world YAML or packaged world name (default: default)"
+    )
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)")
+    p.add_argument(
+        "--port", type=port, default=4560, help="TCP port, 0 for any free one (default: 4560)"
+    )
+    p.add_argument(
+        "--start", metavar="X,Y,Z", help="start position in metres, overriding the world's"
+    )
+    p.add_argument(
+        "--speedup",
+        type=speedup,
+        default=1.0,
+        help="simulated seconds per wall second, or 'max' (default: 1)",
+    )
+    p.add_argument(
+        "--timeout",
+        type=float,
+        default=10.0,
+        help="seconds to wait for an autopilot's reply in lockstep (default: 10)",
+    )
+    p.add_argument(
+        "--wait",
+        action="store_true",
+        help="after an autopilot leaves, wait for the next one in a fresh world",
+    )
+    p.set_defaults(func=cmd_sim)
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    from simbridge.server import LinkEnded, ServerOptions, SimServer
+    from simbridge.vehicle import load_vehicle
+    from simbridge.world import load_world, parse_start, with_start
+
+    world = load_world(args.world)
+    if args.start:
+        world = with_start(world, parse_start(args.start))
+    vehicle = load_vehicle(world.vehicle)
+    server = SimServer(
+        world,
+        vehicle,
+        ServerOptions(
+            host=args.host,
+            port=args.port,
+            speedup=args.speedup,
+            timeout_s=args.timeout,
+            wait=args.wait,
+        ),
+    )
+    try:
+        port = server.listen()
+    except OSError as err:
+        print(
+            f"groundfx sim: cannot listen on {args.host}:{args.port}: {err.strerror}",
+            file=sys.stderr,
+        )
+        return 1
+    print(f"groundfx sim: listening on tcp:{args.host}:{port}", flush=True)
+    signal.signal(signal.SIGTERM, terminate)
+    try:
+        end = server.serve(lambda e: print(f"groundfx sim: {server.summary(str(e))}", flush=True))
+    except KeyboardInterrupt:
+        end = LinkEnded("stopped by signal")
+    print(f"groundfx sim: {server.summary(str(end))}", flush=True)
+    return 0 if end.clean else 1

@@ -1,0 +1,66 @@
+"""The layout is the architecture: imports go down the packages (mission -> autopilot ->
+learner -> simbridge) and no modules import each other in a circle."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGES = ("simbridge", "learner", "autopilot", "mission")  # each may import those before it
+
+
+def _modules() -> dict[str, set[str]]:
+    """Every module of the four packages and the modules of ours it imports (anywhere in it,
+    function-level imports included)."""
+    files = [p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")]
+    names = {}
+    for p in files:
+        parts = p.relative_to(ROOT).with_suffix("").parts
+        names[p] = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+    known = set(names.values())
+    imports: dict[str, set[str]] = {}
+    for path, name in names.items():
+        found = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                targets = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            else:
+                continue
+            found |= {t for t in targets if t in known and t != name}
+        imports[name] = found
+    return imports
+
+
+def test_imports_go_down_the_packages() -> None:
+    upward = [
+        f"{m} imports {d}"
+        for m, deps in _modules().items()
+        for d in deps
+        if PACKAGES.index(d.split(".")[0]) > PACKAGES.index(m.split(".")[0])
+    ]
+    assert upward == []
+
+
+def test_no_modules_import_each_other_in_a_circle() -> None:
+    imports = _modules()
+    # a package's __init__ is imported with any of its modules: not an edge of its own
+    graph = {m: {d for d in deps if not _is_parent(d, m)} for m, deps in imports.items()}
+    circles = []
+    for start in graph:
+        stack, seen = [(start, (start,))], set()
+        while stack:
+            node, path = stack.pop()
+            for nxt in graph.get(node, ()):
+                if nxt == start:
+                    circles.append(" -> ".join((*path, start)))
+                elif nxt not in seen:
+                    seen.add(nxt)
+                    stack.append((nxt, (*path, nxt)))
+    assert circles == []
+
+
+def _is_parent(package: str, module: str) -> bool:
+    return module.startswith(package + ".")
