@@ -407,6 +407,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         model=tuning.model.name,
         malformed=link.malformed,
         unknown=link.unknown,
+        sim_ticks_skipped=link.skipped,
         gcs=gcs.counters.as_dict(),
         mission_items=len(station.items),
         **online_summary,

@@ -4,6 +4,12 @@ Each step it reads the simulator's messages up to HIL_SENSOR (the tick) and answ
 HIL_ACTUATOR_CONTROLS stamped with that tick's time and the lockstep flag. Malformed and
 unknown messages are counted and dropped; a closed socket or a silent simulator ends the
 flight with `LinkLost`.
+
+Until the first reply the simulator streams its ticks at real-time pace (the vehicle on its
+stand), so an autopilot starved after connecting (a busy machine) finds a backlog of ticks.
+A tick with a newer one already received behind it is skipped (counted in `skipped`): the
+autopilot acts on the simulator's present, never on a queue of its past, whose replies the
+simulator would drop as stale anyway. In lockstep there is never more than one tick waiting.
 """
 
 from __future__ import annotations
@@ -69,6 +75,7 @@ class SimLink:
         )
         self._controls = [0.0] * 16
         self.received = 0  # messages decoded
+        self.skipped = 0  # ticks passed over for a newer one (a backlog before the first reply)
 
     @property
     def malformed(self) -> int:
@@ -91,6 +98,9 @@ class SimLink:
                 self._latest[kind] = fields
                 new.add(kind)
                 if kind == "HIL_SENSOR":
+                    if any(k == "HIL_SENSOR" for k, _ in self._queue):
+                        self.skipped += 1  # a newer tick waits behind it
+                        continue
                     return Step(fields, self._latest, new)
             data = self._poll()
             try:

@@ -11,6 +11,7 @@ import time
 from itertools import pairwise
 
 import fastcrc
+import numpy as np
 import pytest
 from pymavlink import mavextra, mavutil
 from pymavlink.quaternion import Quaternion
@@ -18,6 +19,7 @@ from pymavlink.rotmat import Vector3
 
 from simbridge.hil import mavlink
 from simbridge.launch import finish
+from tests.helpers import wait_for
 
 G = 9.81
 START = {
@@ -194,3 +196,34 @@ def test_a_signal_ends_the_simulator_cleanly_with_one_line(sim_process, sig):
     lines = [ln for ln in out.splitlines() if ln.startswith("groundfx sim:")]
     assert lines[-1].startswith("groundfx sim: stopped by signal;")
     assert "Traceback" not in err
+
+
+def test_an_autopilot_starved_before_its_first_reply_acts_on_the_present_tick(sim_process):
+    """Before the first reply the simulator streams ticks in real time; an autopilot that
+    reads them late takes the newest, and its reply puts the simulator in lockstep at once."""
+    import fcntl
+    import termios
+
+    from autopilot.simlink import SimLink
+    from simbridge.vehicle import load_vehicle
+
+    proc, port = sim_process("default", speedup="1")
+    link = SimLink(f"tcp:127.0.0.1:{port}", timeout_s=30.0)
+    pending = struct.pack("i", 0)
+
+    def waiting_bytes() -> int:
+        return struct.unpack("i", fcntl.ioctl(link._sock, termios.FIONREAD, pending))[0]
+
+    wait_for(lambda: waiting_bytes() > 4000, "a backlog of ticks", proc)  # tens of ticks
+    first = link.receive_step()
+    assert link.skipped >= 10
+    channels = load_vehicle().actuator_channels
+    link.send(first.sensor["time_usec"], (0.0, 0.0, 0.0, 0.0), channels, False)
+    times = [first.sensor["time_usec"]]
+    for _ in range(20):
+        times.append(link.receive_step().sensor["time_usec"])
+        link.send(times[-1], (0.0, 0.0, 0.0, 0.0), channels, False)
+    link.close()
+    # after at most one more tick already on its way, one tick per reply: lockstep
+    steps = np.diff(times[2:])
+    assert np.all(steps == steps[0]) and steps[0] == 4000
