@@ -153,7 +153,8 @@ def _legacy_records(data: bytes) -> tuple[dict[str, np.ndarray], list[str]]:
         at = end + 4
     if bad_blocks:
         notes.append(
-            f"microSD: {bad_blocks} blocks with a bad CRC left out ({bad_records} records)"
+            f"microSD: {bad_blocks} block{'s' * (bad_blocks != 1)} with a bad CRC left out "
+            f"({bad_records} records)"
         )
     rec = np.concatenate(chunks) if chunks else np.zeros(0, dtype)
     records = {name: rec[name] for name in dtype.names or ()}
