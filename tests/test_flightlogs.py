@@ -550,3 +550,26 @@ def test_refuses_a_legacy_log_without_a_tick(tmp_path: Path) -> None:
     path.write_bytes(data.replace(b"tick(I)", b"tock(I)", 1))
     with pytest.raises(ConfigError, match=r"log02: the legacy log has no 'tick' variable"):
         read_log(path, vehicle=CF)
+
+
+def test_summary_warns_of_gravity_left_in_the_acceleration() -> None:
+    from learner.flightlogs.summary import summarize
+
+    log = known_flight()
+    biased = dataclasses.replace(log, acceleration_m_s2=log.acceleration_m_s2 + G_UP)
+    warnings = summarize(biased, CF)["warnings"]
+    assert any(
+        "mean vertical acceleration is 9.81 m/s^2: is gravity included" in w for w in warnings
+    )
+
+
+def test_summary_warns_of_a_biased_accelerometer() -> None:
+    from learner.flightlogs.summary import summarize
+
+    log = known_flight()
+    biased = dataclasses.replace(
+        log, acceleration_m_s2=log.acceleration_m_s2 + np.array([0.4, 0, 0])
+    )
+    (warning,) = summarize(biased, CF)["warnings"]
+    assert "departs from the velocity's change by [0.40, " in warning
+    assert "force of 13 mN" in warning

@@ -12,6 +12,9 @@ from simbridge.vehicle import Vehicle
 
 THRUST_RATIO_OK = (0.7, 1.3)  # median vertical thrust over weight of a flight that flies
 MEAN_ACCEL_OK_M_S2 = 2.0  # a mean vertical acceleration beyond this is not a flight's
+# A logged acceleration whose mean departs this far from the velocity's change over the flight
+# is biased (an estimator's tilt or IMU misalignment): the diagnosis sees m x bias as a force.
+ACCEL_BIAS_OK_M_S2 = 0.2
 
 
 def summarize(log: FlightLog, vehicle: Vehicle) -> dict:
@@ -45,6 +48,15 @@ def summarize(log: FlightLog, vehicle: Vehicle) -> dict:
         warnings.append(
             f"the mean vertical acceleration is {mean_acc[2]:.2f} m/s^2: is gravity {g} in the "
             f"accelerometer (accelerometer.gravity), its unit or frame wrong?"
+        )
+    bias = mean_acc - dv
+    if source == "logged" and np.max(np.abs(bias)) > ACCEL_BIAS_OK_M_S2:
+        bx, by, bz = bias
+        warnings.append(
+            f"the logged acceleration's mean departs from the velocity's change by "
+            f"[{bx:.2f}, {by:.2f}, {bz:.2f}] m/s^2, a bias the diagnosis will see as a force of "
+            f"{vehicle.mass_kg * np.max(np.abs(bias)) * 1000:.0f} mN; without the "
+            f"accelerometer columns it differentiates the velocity instead"
         )
     return {
         "rows": len(log),
