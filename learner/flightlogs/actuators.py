@@ -38,6 +38,8 @@ class ActuatorModel:
     unit: str = "rad/s"
     hover_throttle: float | None = None  # collective throttle that carries the weight
     thrust_curve_n: tuple[float, float, float] | None = None
+    # a log column holding the hover throttle row by row (it follows the battery voltage)
+    hover_throttle_column: str | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -54,7 +56,11 @@ class ActuatorModel:
             raise ConfigError(
                 "actuators.thrust_curve_n: kind pwm needs [a, b, c] (N = a u^2 + b u + c)"
             )
-        if self.kind == "throttle" and self.thrust_curve_n is None:
+        if (
+            self.kind == "throttle"
+            and self.thrust_curve_n is None
+            and (self.hover_throttle_column is None)
+        ):
             h = self.hover_throttle
             if h is None or not 0.0 < h <= 1.0:
                 raise ConfigError(
@@ -80,20 +86,28 @@ def actuator_model(data: dict[str, Any] | None) -> ActuatorModel:
     kind = str(data.get("kind", "rotor_speed"))
     default_unit = "rad/s" if kind == "rotor_speed" else "N"
     curve, hover = data.get("thrust_curve_n"), data.get("hover_throttle")
+    hover_column = hover if isinstance(hover, str) else None
+    hover = None if hover_column is not None else hover
     try:
         curve = None if curve is None else tuple(float(c) for c in curve)
         hover = None if hover is None else float(hover)
     except (TypeError, ValueError):
         raise ConfigError(
-            f"actuators: hover_throttle must be a number and thrust_curve_n a list of three "
-            f"numbers, got {hover!r} and {curve!r}"
+            f"actuators: hover_throttle must be a number or a column name and thrust_curve_n a "
+            f"list of three numbers, got {hover!r} and {curve!r}"
         ) from None
-    return ActuatorModel(kind, str(data.get("unit", default_unit)), hover, curve)
+    return ActuatorModel(kind, str(data.get("unit", default_unit)), hover, curve, hover_column)
 
 
-def rotor_thrust_n(values: np.ndarray, model: ActuatorModel, vehicle: Vehicle) -> np.ndarray:
+def rotor_thrust_n(
+    values: np.ndarray,
+    model: ActuatorModel,
+    vehicle: Vehicle,
+    hover_throttle: np.ndarray | None = None,
+) -> np.ndarray:
     """Per-rotor thrust (N, 4 columns) from the logged actuator values: (N, 4), or (N, 1)
-    for a collective column (collective thrust, or a collective throttle)."""
+    for a collective column (collective thrust, or a collective throttle). `hover_throttle`:
+    the hover throttle row by row (the model's `hover_throttle_column`), else the model's."""
     v = np.asarray(values, dtype=float)
     if v.ndim == 1:
         v = v[:, None]
@@ -108,17 +122,27 @@ def rotor_thrust_n(values: np.ndarray, model: ActuatorModel, vehicle: Vehicle) -
         a, b, c = model.thrust_curve_n
         f = a * v * v + b * v + c
     else:  # throttle, linear about the hover throttle
-        assert model.hover_throttle is not None
-        f = vehicle.weight_n / 4.0 * v / model.hover_throttle
+        hover = model.hover_throttle if hover_throttle is None else hover_throttle
+        if hover is None:
+            raise ConfigError(
+                f"actuators.hover_throttle: column {model.hover_throttle_column!r} not given"
+            )
+        h = np.asarray(hover, dtype=float)
+        f = vehicle.weight_n / 4.0 * v / (h[:, None] if h.ndim == 1 else h)
     return np.broadcast_to(f, (len(f), 4)).copy()
 
 
-def rotor_speeds_rad_s(values: np.ndarray, model: ActuatorModel, vehicle: Vehicle) -> np.ndarray:
+def rotor_speeds_rad_s(
+    values: np.ndarray,
+    model: ActuatorModel,
+    vehicle: Vehicle,
+    hover_throttle: np.ndarray | None = None,
+) -> np.ndarray:
     """Rotor speeds (rad/s) that give the logged thrust through the vehicle's C_T."""
     if model.kind == "rotor_speed":
         n = np.asarray(values, dtype=float) * SPEED_UNITS[model.unit]
         return np.broadcast_to(n if n.ndim > 1 else n[:, None], (len(n), 4)).copy()
-    f = rotor_thrust_n(values, model, vehicle)
+    f = rotor_thrust_n(values, model, vehicle, hover_throttle)
     return np.sqrt(np.maximum(f, 0.0) / vehicle.thrust_coefficient_n_s2)
 
 

@@ -1,5 +1,6 @@
-"""`groundfx gap diagnose|bench`: the sim-to-real gap diagnosis on flight logs, and its blind
-check on "real" flights flown in worlds holding effects the diagnosis is not told."""
+"""`groundfx gap diagnose|convert|bench`: the sim-to-real gap diagnosis on flight logs, any
+flight log written in our format, and the diagnosis's blind check on "real" flights flown in
+worlds holding effects the diagnosis is not told."""
 
 from __future__ import annotations
 
@@ -26,6 +27,15 @@ def add_parser(sub: Any) -> None:
     d.add_argument("--no-replay", action="store_true", help="skip the closed-loop re-flights")
     d.add_argument("--out", type=Path, required=True, help="output folder")
     d.set_defaults(func=cmd_diagnose)
+    c = g.add_parser("convert", help="write any readable flight log in our format")
+    c.add_argument("log", type=Path, help="flight log (.csv, .parquet, .rrd, Crazyflie microSD)")
+    c.add_argument("out", type=Path, help="our format: .csv (with a .json sidecar) or .parquet")
+    c.add_argument(
+        "--columns",
+        help="column mapping YAML or packaged name (crazyflie_z, crazyflie, neural_fly)",
+    )
+    c.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
+    c.set_defaults(func=cmd_convert)
     b = g.add_parser("bench", help="the diagnosis, scored on flights with withheld effects")
     b.add_argument("--out", type=Path, required=True, help="output folder (flights are cached)")
     b.add_argument("--cases", help="comma-separated case names (default: all)")
@@ -49,6 +59,25 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     f = result["gap"]["force_rms_n"]
     print(f"force gap {f['before'] * 1000:.2f} -> {f['after'] * 1000:.2f} mN "
           f"(shrink {f['shrink'] * 100:.0f}%); report: {args.out / 'report.md'}")  # fmt: skip
+    return 0
+
+
+def cmd_convert(args: argparse.Namespace) -> int:
+    from learner.flightlogs.flightlog import write_log
+    from learner.flightlogs.readers import read_log
+    from learner.flightlogs.summary import summarize, summary_lines
+    from learner.flightlogs.tables import load_mapping
+    from simbridge.vehicle import load_vehicle
+
+    if args.out.suffix not in (".csv", ".parquet"):
+        raise ConfigError(f"{args.out}: our format is written as .csv or .parquet")
+    vehicle = load_vehicle(args.vehicle)
+    mapping = load_mapping(args.columns) if args.columns else None
+    log = read_log(args.log, mapping, vehicle)
+    write_log(log, args.out)
+    for line in summary_lines(summarize(log, vehicle), vehicle):
+        print(line)
+    print(f"wrote {args.out}")
     return 0
 
 
