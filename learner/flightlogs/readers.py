@@ -29,6 +29,16 @@ def _cfusd(path: Path, mapping: ColumnMapping | None, vehicle: Vehicle | str | N
     return read_cfusd_log(path, mapping, vehicle)
 
 
+def _autopilot(module: str, function: str) -> Reader:
+    # imported when used: pyulog and pymavlink's log readers load only for their logs
+    def read(path: Path, mapping: ColumnMapping | None, vehicle: Vehicle | str | None):
+        import importlib
+
+        return getattr(importlib.import_module(module), function)(path, mapping, vehicle)
+
+    return read
+
+
 def _is_cfusd(head: bytes) -> bool:
     from learner.flightlogs.cfusd import looks_like_cfusd
 
@@ -52,6 +62,10 @@ READERS: dict[str, Reader] = {
     ".csv": read_table_log,
     ".parquet": read_table_log,
     ".rrd": _recording,
+    # autopilot logs (learner/flightlogs/ulog.py, mavlog.py)
+    ".ulg": _autopilot("learner.flightlogs.ulog", "read_ulog"),
+    ".bin": _autopilot("learner.flightlogs.mavlog", "read_dataflash"),
+    ".tlog": _autopilot("learner.flightlogs.mavlog", "read_tlog"),
 }
 
 # For suffixes not in READERS, in order: (what it is, test on the first 4 KiB, reader).
