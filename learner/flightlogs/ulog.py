@@ -196,7 +196,8 @@ def _actuators(log: AutopilotLog, topics: dict, params: dict) -> None:
         channels = [0, 1, 2, 3]
     pwm = stream(_time(outputs), _cols(outputs, [f"output[{c}]" for c in channels]),
                  f"actuator_outputs.output{channels}")  # fmt: skip
-    log.actuators, log.actuator_note = px4_pwm_thrust(_ours(pwm), params)
+    log.actuators, note = px4_pwm_thrust(_ours(pwm), params)
+    log.actuator_note = f"actuator_outputs {note}"
     log.actuator_model = ActuatorModel("throttle", hover_throttle=hover)
 
 
