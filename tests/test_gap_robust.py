@@ -21,7 +21,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from learner.flightlogs.flightlog import FlightLog, write_log
-from learner.gap.candidates import catalogue, world_force
+from learner.gap.candidates import catalogue, nominal_values, world_force
 from learner.gap.flightdata import prepare
 from mission.campaigns.gap_diagnosis import run_diagnosis
 from simbridge.config import ConfigError
@@ -104,9 +104,11 @@ def synthetic_log(
     n = n * (1.0 + 0.02 * np.sin(np.outer(tr["t"], [1.3, 1.7, 2.3, 2.9])))
     log = FlightLog(name, tr["t"], tr["p"], tr["v"], q, np.zeros((len(n), 3)), n,
                     np.zeros_like(tr["p"]), meta=meta or {})  # fmt: skip
-    d = prepare(log, load_world(world_path), vehicle)
+    world = load_world(world_path)
+    d = prepare(log, world, vehicle)
     assert len(d.time_s) == len(log.time_s)  # nothing left out: rows match
-    acc = world_force(true, d, vehicle) / vehicle.mass_kg
+    acc = world_force({**nominal_values(world.effects, vehicle), **true}, d, vehicle)
+    acc /= vehicle.mass_kg
     acc[:, 2] -= GRAVITY_M_S2
     return dataclasses.replace(
         log,
@@ -199,11 +201,12 @@ def test_a_corrected_world_that_cannot_fly_its_replay_is_reported_and_the_report
     leave the ground cushion under the autopilot's position loop (no integral action: 15% of
     g is 1.5 m of height error), so its replay of the held-out mission never lands; the run
     still writes every output and exits 0."""
-    world = world_file(tmp_path / "world.yaml", vehicle="nano")
+    # the replays' autopilot models a ground effect of rho 1: without one in the world it
+    # would never leave the ground
+    ge = [{"name": "ground_effect", "rho": 1.0}]
+    world = world_file(tmp_path / "world.yaml", vehicle="nano", effects=ge)
     mission = tmp_path / "hover.yaml"
-    # reached within 10 cm: the nominal world's flight (an analytic ground-effect model for a
-    # world without one) holds 1.5 cm off
-    wp = {"position_m": [0.0, 0.0, 0.3], "hold_s": 1.0, "acceptance_radius_m": 0.1}
+    wp = {"position_m": [0.0, 0.0, 0.3], "hold_s": 1.0, "acceptance_radius_m": 0.05}
     mission.write_text(yaml.safe_dump({"takeoff_altitude_m": 0.3, "land": True, "waypoints": [wp]}))
     true = {"thrust_mass": np.array([-0.15])}
     fit = write_flights(tmp_path / "logs", NANO, world, true, seeds=(0, 1), seconds=15.0)

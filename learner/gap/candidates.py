@@ -7,6 +7,9 @@ have parameters `values` (name -> array, or absent) puts on the logged flight: r
 drag on the air-relative velocity, and the measurement terms an accelerometer bias or delay add.
 Mass and thrust-coefficient errors scale the residual identically (m a = s T + ... and
 k m a = T + ...), so they are one candidate, `thrust_mass`, with c = s / k - 1.
+
+Bounds and typical magnitudes are the nano's (`REFERENCE`), scaled to any other vehicle by
+`catalogue(vehicle)`, so that the same relative effect sits at the same place in its range.
 """
 
 from __future__ import annotations

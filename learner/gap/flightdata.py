@@ -1,5 +1,6 @@
 """One log prepared for the force model: mid-period attitude and velocity, acceleration,
-rotor commands and the distances to the nominal world's surfaces, as arrays."""
+rotor commands and the distances to the nominal world's surfaces, as arrays; rows in contact
+with a surface and airborne stretches too short to smooth left out, and counted."""
 
 from __future__ import annotations
 
