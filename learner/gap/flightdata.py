@@ -164,7 +164,8 @@ def leave_out(log: FlightLog, world: World, vehicle: Vehicle) -> tuple[FlightLog
 
 
 def describe_left_out(counts: dict) -> str:
-    """'left out: 3 stretches shorter than 0.2 s (41 rows), 120 rows in contact'."""
+    """'left out: 3 stretches shorter than 0.2 s (41 rows), 120 rows in contact with a
+    surface (...)'."""
     parts = []
     if counts.get("short_stretches"):
         parts.append(
@@ -172,7 +173,10 @@ def describe_left_out(counts: dict) -> str:
             f"({counts['short_rows']} rows)"
         )
     if counts.get("contact_rows"):
-        parts.append(f"{counts['contact_rows']} rows in contact with a surface")
+        parts.append(
+            f"{counts['contact_rows']} rows in contact with a surface (the body within "
+            f"{CONTACT_MARGIN_M * 1000:g} mm of it)"
+        )
     return "left out: " + (", ".join(parts) if parts else "nothing")
 
 
