@@ -7,11 +7,16 @@ have parameters `values` (name -> array, or absent) puts on the logged flight: r
 drag on the air-relative velocity, and the measurement terms an accelerometer bias or delay add.
 Mass and thrust-coefficient errors scale the residual identically (m a = s T + ... and
 k m a = T + ...), so they are one candidate, `thrust_mass`, with c = s / k - 1.
+
+Bounds and typical magnitudes are the nano's (`REFERENCE`), scaled to any other vehicle by
+`catalogue(vehicle)`, so that the same relative effect sits at the same place in its range.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.signal import lfilter
@@ -25,7 +30,7 @@ from simbridge.effects.ground import (
     thrust_gain_array,
 )
 from simbridge.effects.proximity import WallEffectParams, wall_force_array
-from simbridge.vehicle import Vehicle
+from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
 
 @dataclass(frozen=True)
@@ -39,49 +44,101 @@ class Candidate:
     effects: tuple[str, ...]  # catalogue effects it stands for
 
 
-CANDIDATES: dict[str, Candidate] = {
-    c.name: c
-    for c in (
-        Candidate("ground_effect", ("rho",), ("1",), (0.01,), (10.0,), (1.0,), ("ground_effect",)),
-        Candidate(
-            "ceiling_effect", ("rho",), ("1",), (0.01,), (10.0,), (1.0,), ("ceiling_effect",)
-        ),
-        Candidate("wall_effect", ("gain",), ("1",), (-10.0,), (10.0,), (0.5,), ("wall_effect",)),
-        Candidate(
-            "rotor_drag",
-            ("kx", "ky", "kz"),
-            ("N/((rad/s)(m/s))",) * 3,
-            (0.0,) * 3,
-            (1e-3,) * 3,
-            (2.2e-5, 2.2e-5, 1.0e-5),
-            ("rotor_drag",),
-        ),
-        Candidate(
-            "body_drag", ("drag_coefficient",), ("1",), (0.0,), (5.0,), (1.0,), ("body_drag",)
-        ),
-        Candidate(
-            "wind", ("wx", "wy", "wz"), ("m/s",) * 3, (-10.0,) * 3, (10.0,) * 3, (0.5,) * 3,
-            ("wind",),
-        ),
-        Candidate("motor_lag", ("tau",), ("s",), (0.002,), (0.3,), (0.02,), ("motor_lag",)),
-        Candidate(
-            "thrust_mass", ("c",), ("1",), (-0.5,), (1.0,), (0.05,),
-            ("thrust_coefficient", "mass_error"),
-        ),
-        Candidate(
-            "sensor_bias", ("bx", "by", "bz"), ("m/s^2",) * 3, (-5.0,) * 3, (5.0,) * 3, (0.1,) * 3,
-            ("sensor_bias",),
-        ),
-        Candidate(
-            "sensor_latency", ("imu_delay",), ("s",), (0.0,), (0.1,), (0.008,), ("sensor_latency",)
-        ),
-    )
-}  # fmt: skip
+# The reference vehicle the catalogue's magnitudes were chosen for: the thesis's nano
+# quadrotor (simbridge/vehicles/nano.yaml). Other vehicles get them scaled (`catalogue`).
+REFERENCE_MASS_KG = 0.056
+REFERENCE_THRUST_COEFFICIENT_N_S2 = 2.39e-5
+REFERENCE_BODY_SIZE_M = (0.08, 0.08, 0.0252)
+# A fitted rho of 21 gives 17% more thrust at three rotor radii, the most real Crazyflies
+# show (6-17% at 2-3 radii); 25 leaves room above it without reaching the simulator's 50.
+RHO_MAX = 25.0
+# Half of g: a larger bias is gravity left in the accelerometer, which the residual's
+# plausibility check (learner/gap/plausibility.py) stops before any fit.
+BIAS_MAX_M_S2 = 5.0
+
+REFERENCE: tuple[Candidate, ...] = (
+    Candidate("ground_effect", ("rho",), ("1",), (0.01,), (RHO_MAX,), (1.0,), ("ground_effect",)),
+    Candidate("ceiling_effect", ("rho",), ("1",), (0.01,), (RHO_MAX,), (1.0,), ("ceiling_effect",)),
+    Candidate("wall_effect", ("gain",), ("1",), (-10.0,), (10.0,), (0.5,), ("wall_effect",)),
+    Candidate(
+        "rotor_drag", ("kx", "ky", "kz"), ("N/((rad/s)(m/s))",) * 3, (0.0,) * 3, (1e-3,) * 3,
+        (2.2e-5, 2.2e-5, 1.0e-5), ("rotor_drag",),
+    ),
+    Candidate("body_drag", ("drag_coefficient",), ("1",), (0.0,), (5.0,), (1.0,), ("body_drag",)),
+    Candidate(
+        "wind", ("wx", "wy", "wz"), ("m/s",) * 3, (-10.0,) * 3, (10.0,) * 3, (0.5,) * 3, ("wind",),
+    ),
+    Candidate("motor_lag", ("tau",), ("s",), (0.002,), (0.3,), (0.02,), ("motor_lag",)),
+    Candidate(
+        "thrust_mass", ("c",), ("1",), (-0.5,), (1.0,), (0.05,),
+        ("thrust_coefficient", "mass_error"),
+    ),
+    Candidate(
+        "sensor_bias", ("bx", "by", "bz"), ("m/s^2",) * 3, (-BIAS_MAX_M_S2,) * 3,
+        (BIAS_MAX_M_S2,) * 3, (0.1,) * 3, ("sensor_bias",),
+    ),
+    Candidate(
+        "sensor_latency", ("imu_delay",), ("s",), (0.0,), (0.1,), (0.008,), ("sensor_latency",)
+    ),
+)  # fmt: skip
+# Names, parameters, units and groups (the same for every vehicle); bounds and magnitudes of
+# the reference vehicle: use `catalogue(vehicle)` for those.
+CANDIDATES: dict[str, Candidate] = {c.name: c for c in REFERENCE}
 Values = dict[str, np.ndarray]
 
 
-def nominal_values(effects: EffectSet) -> Values:
-    """The nominal world's effects as candidate values (absent effects are left out)."""
+def body_areas_m2(body_size_m: tuple[float, float, float]) -> tuple[float, float, float]:
+    """The body-drag reference areas facing body x, y and z of a box body (m^2)."""
+    x, y, z = body_size_m
+    return (y * z, x * z, x * y)
+
+
+def scale_factors(vehicle: Vehicle) -> dict[str, float]:
+    """How the catalogue's dimensional magnitudes grow from the reference vehicle to
+    `vehicle`, so that the same relative effect sits at the same place in its range: rotor
+    drag with weight over hover rotor speed (the same share of the weight per m/s at hover),
+    wind with sqrt(weight / frontal area) (the air speed at which body drag is a given share
+    of the weight). The rest needs none: rho and the wall gain are relative to the thrust
+    with distances in rotor radii, C_d applies to the vehicle's own areas, the thrust-mass
+    error is a ratio, a bias is an acceleration (relative to g), lag and latency are times."""
+    ref_weight = REFERENCE_MASS_KG * GRAVITY_M_S2
+    ref_hover = math.sqrt(ref_weight / (4.0 * REFERENCE_THRUST_COEFFICIENT_N_S2))
+    ref_area = _frontal_area_m2(REFERENCE_BODY_SIZE_M)
+    weight, hover = vehicle.weight_n, vehicle.hover_rotor_speed_rad_s
+    area = _frontal_area_m2(vehicle.body_size_m)
+    return {
+        "rotor_drag": (weight / hover) / (ref_weight / ref_hover),
+        "wind": math.sqrt((weight / area) / (ref_weight / ref_area)),
+    }
+
+
+def _frontal_area_m2(body_size_m: tuple[float, float, float]) -> float:
+    ax, ay, _ = body_areas_m2(body_size_m)
+    return 0.5 * (ax + ay)
+
+
+@functools.lru_cache(maxsize=16)
+def catalogue(vehicle: Vehicle) -> dict[str, Candidate]:
+    """The candidates with bounds and typical magnitudes for `vehicle` (`scale_factors`);
+    the reference vehicle's are the reference values themselves."""
+    factors = scale_factors(vehicle)
+    out = {}
+    for c in REFERENCE:
+        f = factors.get(c.name, 1.0)
+        if f != 1.0:
+            c = replace(
+                c,
+                lo=tuple(x * f for x in c.lo),
+                hi=tuple(x * f for x in c.hi),
+                typical=tuple(x * f for x in c.typical),
+            )
+        out[c.name] = c
+    return out
+
+
+def nominal_values(effects: EffectSet, vehicle: Vehicle | None = None) -> Values:
+    """The nominal world's effects as candidate values (absent effects are left out). With
+    `vehicle`, a body drag's C_d is restated on the vehicle's own areas (the candidate's)."""
     out: Values = {}
     if effects.ground_effect:
         out["ground_effect"] = np.array([effects.ground_effect.rho])
@@ -92,7 +149,10 @@ def nominal_values(effects: EffectSet) -> Values:
     if effects.rotor_drag:
         out["rotor_drag"] = np.array(effects.rotor_drag.coefficient_n_s_m)
     if effects.body_drag:
-        out["body_drag"] = np.array([effects.body_drag.drag_coefficient])
+        cd = effects.body_drag.drag_coefficient
+        if vehicle is not None:
+            cd *= sum(effects.body_drag.area_m2) / sum(body_areas_m2(vehicle.body_size_m))
+        out["body_drag"] = np.array([cd])
     if effects.wind:
         out["wind"] = np.array(effects.wind.mean_m_s)
     if effects.motor_lag:
@@ -141,7 +201,7 @@ def world_force(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
     if "wall_effect" in values:
         wall = WallEffectParams(gain=float(values["wall_effect"][0]))
         force += wall_force_array(wall, thrust, radius, d.wall_distances_m)
-    force += _drag(values, d)
+    force += _drag(values, d, vehicle)
     if "sensor_latency" in values:
         # the accelerometer reports the body-frame specific force of `delay` ago; the log
         # turns it into the world frame with the current attitude
@@ -155,7 +215,7 @@ def world_force(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
     return force
 
 
-def _drag(values: Values, d: FlightData) -> np.ndarray:
+def _drag(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
     if "rotor_drag" not in values and "body_drag" not in values:
         return np.zeros((len(d.time_s), 3))
     wind = values.get("wind", np.zeros(3))
@@ -167,14 +227,17 @@ def _drag(values: Values, d: FlightData) -> np.ndarray:
         params = RotorDragParams(coefficient_n_s_m=(float(k[0]), float(k[1]), float(k[2])))
         body += np.column_stack(rotor_drag_n(params, d.commands_rad_s.sum(axis=1), comps))
     if "body_drag" in values:
-        params = BodyDragParams(drag_coefficient=float(values["body_drag"][0]))
+        params = BodyDragParams(
+            drag_coefficient=float(values["body_drag"][0]),
+            area_m2=body_areas_m2(vehicle.body_size_m),
+        )
         body += np.column_stack(body_drag_n(params, comps))
     return np.einsum("nij,nj->ni", d.rotation, body)
 
 
-def to_world_effects(values: Values) -> list[dict]:
+def to_world_effects(values: Values, vehicle: Vehicle | None = None) -> list[dict]:
     """Candidate values as world-YAML effect entries (thrust_mass as a C_T scale: the same
-    translational dynamics)."""
+    translational dynamics; body drag with `vehicle`'s areas, which the fit used)."""
     out: list[dict] = []
     for name, v in values.items():
         x = [float(a) for a in v]
@@ -185,7 +248,10 @@ def to_world_effects(values: Values) -> list[dict]:
         elif name == "rotor_drag":
             out.append({"name": name, "coefficient_n_s_m": x})
         elif name == "body_drag":
-            out.append({"name": name, "drag_coefficient": x[0]})
+            entry: dict = {"name": name, "drag_coefficient": x[0]}
+            if vehicle is not None:
+                entry["area_m2"] = list(body_areas_m2(vehicle.body_size_m))
+            out.append(entry)
         elif name == "wind":
             out.append({"name": name, "mean_m_s": x})
         elif name == "motor_lag":

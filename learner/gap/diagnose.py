@@ -12,7 +12,8 @@ import numpy as np
 from learner.flightlogs.flightlog import FlightLog
 from learner.gap import fit as gapfit
 from learner.gap.candidates import CANDIDATES, Values, nominal_values
-from learner.gap.flightdata import FlightData, prepare
+from learner.gap.flightdata import FlightData, describe_left_out, prepare
+from learner.gap.plausibility import check as check_plausible
 from learner.gap.regimes import REGIMES, RegimeBin, regime_table, regime_variables, rules
 from learner.gap.residual import force_gap_ms, residual_n
 from learner.gap.rollout import HORIZON_S, rms, rollout_errors, shrink
@@ -37,6 +38,9 @@ class Diagnosis:
     regimes: list[RegimeBin]
     rules: list[str]
     gap: dict[str, Any]
+    vehicle: Vehicle | None = None
+    left_out: dict[str, Any] = field(default_factory=dict)  # rows left out, counted
+    notes: list[str] = field(default_factory=list)  # every fallback taken, in words
     residuals: dict[str, np.ndarray] = field(default_factory=dict)  # flight -> (N, 3)
     corrected_residuals: dict[str, np.ndarray] = field(default_factory=dict)
     flights: dict[str, FlightData] = field(default_factory=dict)
@@ -50,10 +54,17 @@ def _problem(flights: list[FlightData], nominal: Values, vehicle: Vehicle) -> ga
 
 
 def effect_report(
-    problem: gapfit.Problem, best: gapfit.Fit, excitation: dict[str, float], excited: list[str]
+    problem: gapfit.Problem,
+    best: gapfit.Fit,
+    excitation: dict[str, float],
+    excited: list[str],
+    trail: list[dict] | None = None,
 ) -> dict[str, dict[str, Any]]:
-    """Each catalogue effect: present, absent or not identifiable (not excited, or
-    indistinguishable from another: the group is named), with parameters and 95% CIs."""
+    """Each catalogue effect: present, absent, at its bound (its fit ended on a bound of the
+    catalogue's range: stronger than the range, or compensating another; never "absent") or
+    not identifiable (not excited, or indistinguishable from another: the group is named),
+    with parameters and 95% CIs."""
+    bounded = _bounded(trail or [])
     sens = {c: gapfit.sensitivities(problem, c, {**best.values}) for c in excited}
     out: dict[str, dict[str, Any]] = {}
     for name, cand in CANDIDATES.items():
@@ -91,6 +102,15 @@ def effect_report(
             entry["status"] = "not identifiable"
             entry["why"] = f"not excited by the flights (z = {excitation[name]:.1f})"
             entry["group"] = list(cand.effects)
+        elif name in bounded:
+            step = bounded[name]
+            entry["status"] = "at bound"
+            entry["at_bound"] = step["at_bound"]
+            entry["why"] = bound_sentence(step["at_bound"])
+            entry["parameters"] = {
+                p: {"value": v, "ci95": None, "unit": cand.units[i]}
+                for i, (p, v) in enumerate(zip(cand.params, step["value"], strict=True))
+            }
         else:
             entry["status"] = "absent"
         for effect in cand.effects:
@@ -102,15 +122,69 @@ def effect_report(
     return out
 
 
+def _bounded(trail: list[dict]) -> dict[str, dict]:
+    """Candidates whose last fit in the forward search ended on a bound: their trail step."""
+    last: dict[str, dict] = {}
+    for step in trail:
+        if "added" in step:
+            last[step["added"]] = step
+    return {name: step for name, step in last.items() if step.get("at_bound")}
+
+
+def bound_sentence(hits: list[dict]) -> str:
+    """'rho reached its bound 25: the effect is stronger than the catalogue's range'."""
+    parts = [f"{h['parameter']} reached its bound {h['bound']:.4g}" for h in hits]
+    return (
+        ", ".join(parts) + ": the effect is stronger than the catalogue's range, or the fit "
+        "leans on it to make up for another; not added to the corrected world"
+    )
+
+
+def left_out_counts(flights: list[FlightData]) -> dict[str, Any]:
+    """Rows left out of every flight (contact, short stretches), summed and per flight."""
+    keys = ("rows", "contact_rows", "short_stretches", "short_rows")
+    total: dict[str, Any] = {k: sum(d.left_out.get(k, 0) for d in flights) for k in keys}
+    total["min_stretch_s"] = flights[0].left_out.get("min_stretch_s") if flights else None
+    total["per_flight"] = {d.name: d.left_out for d in flights}
+    total["summary"] = describe_left_out(total)
+    return total
+
+
+def fallback_notes(fit: list[FlightData], hold: list[FlightData], folds: int) -> list[str]:
+    """Every way the analysis departs from its full form, in words."""
+    notes = []
+    n = len(fit)
+    if n < 2:
+        where = "on the held-out flights" if hold else "in-sample, on the fitting flight itself"
+        notes.append(
+            f"cross-validation: --folds {folds} asked, but with one fitting flight there is no "
+            "flight to leave out: each step of the effect search was judged without the "
+            f"cross-validated explained variance (cv_ev), and the gap is measured {where}"
+            + ("" if hold else " (optimistic: the same data fitted and scored)")
+        )
+    elif folds > n:
+        notes.append(
+            f"cross-validation: --folds {folds} asked with {n} fitting flights: {n} folds, "
+            "one flight left out at a time"
+        )
+    derived = [d.name for d in fit + hold if not d.measured_acceleration]
+    if derived:
+        notes.append(
+            "acceleration differentiated from the logged velocity (a Savitzky-Golay derivative "
+            f"over 0.1 s): the logs carry none: {', '.join(derived)}"
+        )
+    return notes
+
+
 def _thrust_mass_as(effect: str, c: dict[str, Any]) -> dict[str, Any]:
-    """c = s / k - 1 read as a C_T scale s (k = 1) or a mass scale k (s = 1)."""
-    lo, hi = c["ci95"]
+    """c = s / k - 1 read as a C_T scale s (k = 1) or a mass scale k (s = 1); a fit on a
+    bound has no interval."""
+    lo, hi = c["ci95"] or (np.nan, np.nan)
     if effect == "thrust_coefficient":
-        return {"scale": {"value": 1.0 + c["value"], "ci95": [1.0 + lo, 1.0 + hi], "unit": "1"}}
-    return {
-        "scale": {"value": 1.0 / (1.0 + c["value"]), "ci95": [1.0 / (1.0 + hi), 1.0 / (1.0 + lo)],
-                  "unit": "1"}
-    }  # fmt: skip
+        ci = None if c["ci95"] is None else [1.0 + lo, 1.0 + hi]
+        return {"scale": {"value": 1.0 + c["value"], "ci95": ci, "unit": "1"}}
+    ci = None if c["ci95"] is None else [1.0 / (1.0 + hi), 1.0 / (1.0 + lo)]
+    return {"scale": {"value": 1.0 / (1.0 + c["value"]), "ci95": ci, "unit": "1"}}
 
 
 def diagnose(
@@ -121,10 +195,12 @@ def diagnose(
     folds: int = 3,
 ) -> Diagnosis:
     """The whole analysis; with no held-out logs the gap is measured by cross-validation."""
-    nominal = nominal_values(world.effects)
+    nominal = nominal_values(world.effects, vehicle)
     fit_data = [prepare(log, world, vehicle) for log in fitting]
     hold_data = [prepare(log, world, vehicle) for log in held_out]
     problem = _problem(fit_data, nominal, vehicle)
+    hold_res = [residual_n(d, nominal, vehicle) for d in hold_data]
+    check_plausible([d.name for d in fit_data + hold_data], problem.residuals + hold_res, vehicle)
     excitation = {c: gapfit.excitation_z(problem, c) for c in CANDIDATES}
     excited = [c for c in CANDIDATES if excitation[c] >= gapfit.Z_EXCITE]
     # the effective sample size of the residual once the excited effects are all fitted
@@ -134,9 +210,9 @@ def diagnose(
         [(r - p)[:: gapfit.STRIDE] for r, p in zip(problem.residuals, after, strict=True)]
     )
     best, trail = gapfit.forward_search(problem, excited, folds)
-    effects = effect_report(problem, best, excitation, excited)
+    effects = effect_report(problem, best, excitation, excited, trail)
     all_data = fit_data + hold_data
-    all_res = problem.residuals + [residual_n(d, nominal, vehicle) for d in hold_data]
+    all_res = problem.residuals + hold_res
     table = regime_table(all_data, all_res, vehicle)
     if hold_data:
         gap = held_out_gap(_problem(hold_data, nominal, vehicle), best.values)
@@ -155,6 +231,9 @@ def diagnose(
         regimes=table,
         rules=rules(table),
         gap=gap,
+        vehicle=vehicle,
+        left_out=left_out_counts(all_data),
+        notes=fallback_notes(fit_data, hold_data, folds),
         residuals={d.name: r for d, r in zip(all_data, all_res, strict=True)},
         corrected_residuals={
             d.name: r - p
@@ -241,7 +320,7 @@ def cross_validated_gap(
     problem: gapfit.Problem, names: tuple[str, ...], folds: int
 ) -> dict[str, Any]:
     """With no held-out logs: each fold's flights scored with the model fitted on the others."""
-    k = min(folds, len(problem.flights))
+    k = min(folds, len(problem.flights))  # one flight: scored in-sample (a note says so)
     before, after = [], []
     for fold in range(max(k, 1)):
         test = [i for i in range(len(problem.flights)) if k < 2 or i % k == fold]
@@ -253,6 +332,8 @@ def cross_validated_gap(
         after.append(g["force_rms_n"]["after"])
     b, a = float(np.mean(before)), float(np.mean(after))
     return {
-        "cross_validated": True,
+        "cross_validated": k >= 2,
+        "in_sample": k < 2,
+        "folds": k if k >= 2 else 0,
         "force_rms_n": {"before": b, "after": a, "shrink": shrink(b, a)},
     }

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from learner.gap.candidates import CANDIDATES, Values, world_force
+from learner.gap.candidates import CANDIDATES, Candidate, Values, catalogue, world_force
 from learner.gap.flightdata import FlightData
 from learner.gap.residual import smooth_per_segment
 from learner.gap.stats import wald_p
@@ -39,6 +39,11 @@ class Problem:
     nominal_force: list[np.ndarray] = field(default_factory=list)
     ess_ratio: float = 1.0
     noise_var: float = 1.0
+
+    @property
+    def catalogue(self) -> dict[str, Candidate]:
+        """The candidates' bounds and magnitudes for this vehicle."""
+        return catalogue(self.vehicle)
 
     def __post_init__(self) -> None:
         if not self.nominal_force:
@@ -85,8 +90,8 @@ def noise_variance(residuals: list[np.ndarray], flights: list[FlightData]) -> fl
     return float(np.var(fast) * 5.0 / 4.0)  # the average shares 1/5 of each sample's noise
 
 
-def start_values(name: str, nominal: Values) -> np.ndarray:
-    c = CANDIDATES[name]
+def start_values(name: str, nominal: Values, cat: dict[str, Candidate] | None = None) -> np.ndarray:
+    c = (cat or CANDIDATES)[name]
     if name in nominal:
         return np.array(nominal[name], dtype=float)
     if name in ("wind", "thrust_mass", "sensor_bias", "sensor_latency", "wall_effect"):
@@ -94,8 +99,8 @@ def start_values(name: str, nominal: Values) -> np.ndarray:
     return np.array(c.typical, dtype=float)
 
 
-def _scales(names: tuple[str, ...]) -> np.ndarray:
-    return np.concatenate([np.abs(CANDIDATES[n].typical) for n in names])
+def _scales(names: tuple[str, ...], cat: dict[str, Candidate] | None = None) -> np.ndarray:
+    return np.concatenate([np.abs((cat or CANDIDATES)[n].typical) for n in names])
 
 
 def _unpack(x: np.ndarray, names: tuple[str, ...]) -> Values:
@@ -115,10 +120,12 @@ def fit(problem: Problem, names: tuple[str, ...]) -> Fit:
     if not names:
         rss = float(target @ target)
         return Fit((), {}, {}, rss, n, 0, _bic(rss, n, 0, problem.ess_ratio), np.zeros((0, 0)))
-    scale = _scales(names)
-    lo = np.concatenate([CANDIDATES[c].lo for c in names]) / scale
-    hi = np.concatenate([CANDIDATES[c].hi for c in names]) / scale
-    x0 = np.clip(np.concatenate([start_values(c, problem.nominal) for c in names]) / scale, lo, hi)
+    cat = problem.catalogue
+    scale = _scales(names, cat)
+    lo = np.concatenate([cat[c].lo for c in names]) / scale
+    hi = np.concatenate([cat[c].hi for c in names]) / scale
+    x0 = np.concatenate([start_values(c, problem.nominal, cat) for c in names]) / scale
+    x0 = np.clip(x0, lo, hi)
 
     def fun(x: np.ndarray) -> np.ndarray:
         pred = problem.predicted(_unpack(x * scale, names))
@@ -204,10 +211,10 @@ def cross_validated_ev(problem: Problem, names: tuple[str, ...], folds: int) -> 
 def sensitivities(problem: Problem, name: str, at: Values | None = None) -> np.ndarray:
     """(samples * 3, params) finite-difference sensitivity of the predicted residual to the
     candidate's parameters, at `at` (default: the nominal value plus a typical size)."""
-    c = CANDIDATES[name]
+    c = problem.catalogue[name]
     base = dict(at or {})
     if name not in base:
-        base[name] = probe_values(name, problem.nominal)
+        base[name] = probe_values(name, problem.nominal, problem.catalogue)
     f0 = np.concatenate([p[::STRIDE].ravel() for p in problem.predicted(base)])
     cols = []
     for j in range(len(c.params)):
@@ -220,8 +227,8 @@ def sensitivities(problem: Problem, name: str, at: Values | None = None) -> np.n
     return np.column_stack(cols)
 
 
-def probe_values(name: str, nominal: Values) -> np.ndarray:
-    c = CANDIDATES[name]
+def probe_values(name: str, nominal: Values, cat: dict[str, Candidate] | None = None) -> np.ndarray:
+    c = (cat or CANDIDATES)[name]
     if name in nominal:
         return np.asarray(nominal[name], dtype=float) + 0.5 * np.asarray(c.typical)
     return np.asarray(c.typical, dtype=float)
@@ -230,14 +237,15 @@ def probe_values(name: str, nominal: Values) -> np.ndarray:
 def excitation_z(problem: Problem, name: str) -> float:
     """How many noise sigmas a typical-size effect stands out of the data (effective samples):
     sqrt(sum of its squared force / noise variance * ESS ratio)."""
+    cat = problem.catalogue
     if name == "wind" and not any(d in problem.nominal for d in DRAGS):
-        probe: Values = {"rotor_drag": np.array(CANDIDATES["rotor_drag"].typical)}
+        probe: Values = {"rotor_drag": np.array(cat["rotor_drag"].typical)}
         base = np.concatenate([p[::STRIDE].ravel() for p in problem.predicted(probe)])
-        probe["wind"] = probe_values("wind", problem.nominal)
+        probe["wind"] = probe_values("wind", problem.nominal, cat)
         moved = np.concatenate([p[::STRIDE].ravel() for p in problem.predicted(probe)])
         signal = moved - base
     else:
-        probe = {name: probe_values(name, problem.nominal)}
+        probe = {name: probe_values(name, problem.nominal, cat)}
         signal = np.concatenate([p[::STRIDE].ravel() for p in problem.predicted(probe)])
     z2 = float(signal @ signal) / problem.noise_var * problem.ess_ratio
     return float(np.sqrt(z2))
@@ -275,20 +283,36 @@ def added_p(f: Fit, name: str, nominal: Values) -> float:
     raise KeyError(name)
 
 
-def effect_size(name: str, value: np.ndarray, nominal: Values) -> float:
+def effect_size(
+    name: str, value: np.ndarray, nominal: Values, cat: dict[str, Candidate] | None = None
+) -> float:
     """The added effect's largest parameter departure from its null, in catalogue magnitudes."""
-    typical = np.abs(np.asarray(CANDIDATES[name].typical, dtype=float))
+    typical = np.abs(np.asarray((cat or CANDIDATES)[name].typical, dtype=float))
     return float(np.max(np.abs(np.asarray(value) - null_values(name, nominal)) / typical))
 
 
-def at_bound(name: str, value: np.ndarray) -> bool:
-    """Whether a parameter sits on a bound: a compensating, implausible solution (thrust
-    scale 0.5 against a 4.9 m/s^2 bias) on which the Wald test does not hold. A non-negative
-    quantity's floor (no drag along z, the shortest lag) is no such bound."""
-    lo, hi = np.asarray(CANDIDATES[name].lo), np.asarray(CANDIDATES[name].hi)
+def bound_hits(name: str, value: np.ndarray, cat: dict[str, Candidate] | None = None) -> list[dict]:
+    """The parameters sitting on a bound: a compensating, implausible solution (thrust scale
+    0.5 against a 4.9 m/s^2 bias) on which the Wald test does not hold, or an effect stronger
+    than the catalogue's range. A non-negative quantity's floor (no drag along z, the shortest
+    lag) is no such bound."""
+    c = (cat or CANDIDATES)[name]
+    lo, hi = np.asarray(c.lo), np.asarray(c.hi)
     tol = 1e-3 * (hi - lo)
     v = np.asarray(value)
-    return bool(np.any(((lo < 0.0) & (v - lo <= tol)) | (hi - v <= tol)))
+    out = []
+    for i, p in enumerate(c.params):
+        side = "low" if lo[i] < 0.0 and v[i] - lo[i] <= tol[i] else None
+        side = "high" if hi[i] - v[i] <= tol[i] else side
+        if side:
+            bound = float(lo[i] if side == "low" else hi[i])
+            out.append({"parameter": p, "value": float(v[i]), "bound": bound, "side": side})
+    return out
+
+
+def at_bound(name: str, value: np.ndarray, cat: dict[str, Candidate] | None = None) -> bool:
+    """Whether a parameter sits on a bound (`bound_hits`)."""
+    return bool(bound_hits(name, value, cat))
 
 
 def selected(
@@ -312,6 +336,12 @@ def selected(
         and cv_gain > 0.0
         and size >= MIN_SIZE
     )
+
+
+CV_SKIPPED = (
+    "not computed: one fitting flight, none to leave out; the step was judged without the "
+    "cross-validated check"
+)
 
 
 def forward_search(problem: Problem, candidates: list[str], folds: int) -> tuple[Fit, list[dict]]:
@@ -339,14 +369,17 @@ def forward_search(problem: Problem, candidates: list[str], folds: int) -> tuple
             p_value = added_p(f, f.names[-1], problem.nominal)
             gain = float("inf") if np.isnan(cv) else cv - current_cv
             name, value = f.names[-1], f.values[f.names[-1]]
-            size = effect_size(name, value, problem.nominal)
-            interior = not at_bound(name, value)
+            size = effect_size(name, value, problem.nominal, problem.catalogue)
+            hits = bound_hits(name, value, problem.catalogue)
+            interior = not hits
             ok = selected(current.bic - f.bic, p_value, len(pool), gain, size, interior)
-            trail.append(
-                {"set": list(f.names), "bic": f.bic, "cv_ev": cv, "wald_p": p_value,
-                 "tried": len(pool), "size_typical": size, "interior": interior,
-                 "selected": ok}
-            )  # fmt: skip
+            step = {"set": list(f.names), "added": name, "value": [float(x) for x in value],
+                    "bic": f.bic, "cv_ev": None if np.isnan(cv) else cv, "wald_p": p_value,
+                    "tried": len(pool), "size_typical": size, "interior": interior,
+                    "at_bound": hits, "selected": ok}  # fmt: skip
+            if np.isnan(cv):  # one fitting flight: none to leave out
+                step["cv_ev_note"] = CV_SKIPPED
+            trail.append(step)
             if ok:
                 accepted = (f, cv)
                 break

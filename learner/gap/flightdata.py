@@ -1,5 +1,6 @@
 """One log prepared for the force model: mid-period attitude and velocity, acceleration,
-rotor commands and the distances to the nominal world's surfaces, as arrays."""
+rotor commands and the distances to the nominal world's surfaces, as arrays; rows in contact
+with a surface and airborne stretches too short to smooth left out, and counted."""
 
 from __future__ import annotations
 
@@ -41,6 +42,7 @@ class FlightData:
     height_m: np.ndarray  # (N,) centre of mass above the surface below (inf: none)
     substeps: int  # physics steps per control period (motor lag)
     meta: dict
+    left_out: dict = dataclasses.field(default_factory=dict)  # rows left out, counted
 
 
 def quat_to_matrices(q: np.ndarray) -> np.ndarray:
@@ -79,19 +81,46 @@ def smooth_positions(p: np.ndarray, segment: np.ndarray, dt_s: float) -> np.ndar
     return out
 
 
-CONTACT_MARGIN_M = 0.005  # closer than this to a wall or ceiling: touching it
+CONTACT_MARGIN_M = 0.005  # closer than this to a surface: touching it
+# An airborne stretch must be at least this long: twice the smoothing windows (acceleration
+# and force gap, 0.1 s), so that its middle is averaged over airborne rows only. Shorter ones
+# are a touchdown bounce or a few rows between contacts, whose forces are contact forces.
+MIN_STRETCH_S = 0.2
+
+
+def _body_corners_m(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
+    """(N, 4, 3) the four bottom corners of the body box in the world."""
+    hx, hy, hz = np.asarray(vehicle.body_size_m) / 2.0
+    corners = np.array([[sx * hx, sy * hy, -hz] for sx in (1, -1) for sy in (1, -1)])
+    rotation = quat_to_matrices(log.quaternion)
+    return log.position_m[:, None, :] + np.einsum("nij,kj->nki", rotation, corners)
 
 
 def touching(log: FlightLog, world: World, vehicle: Vehicle) -> np.ndarray:
-    """Rows where the body touches a wall or the ceiling: contact forces no aerodynamic
-    effect explains (a strong wall or ceiling effect pulls the vehicle into contact); the
-    ground is left out already by logging only airborne steps."""
+    """Rows where the body touches a surface: the ground, a box top or step under any corner
+    of the body, a wall, the ceiling. Contact forces no aerodynamic effect explains (and a
+    strong wall or ceiling effect pulls the vehicle into contact)."""
     half = np.asarray(vehicle.body_size_m) / 2.0
     walls = wall_distances_m(log.position_m, world.obstacles, 1.0)
     out = np.min(walls, axis=1) < max(half[0], half[1]) + CONTACT_MARGIN_M
     if world.ceiling_height_m is not None:
         out |= log.position_m[:, 2] + half[2] + CONTACT_MARGIN_M > world.ceiling_height_m
+    corners = _body_corners_m(log, vehicle).reshape(-1, 3)
+    below = height_below_m(corners, world.obstacles, 1.0).reshape(-1, 4)
+    # a corner inside a box (no surface below within reach, yet low) or sunk into the ground
+    sunk = corners[:, 2].reshape(-1, 4) < CONTACT_MARGIN_M
+    out |= np.any((below < CONTACT_MARGIN_M) | sunk, axis=1)
     return out
+
+
+def short_stretches(t: np.ndarray, dt_s: float) -> np.ndarray:
+    """Rows of airborne stretches shorter than MIN_STRETCH_S (or than the acceleration's
+    smoothing window, at low rates): left out."""
+    new = np.concatenate([[True], np.diff(t) > GAP_PERIODS * dt_s])
+    segment = np.cumsum(new) - 1
+    sizes = np.bincount(segment)
+    min_rows = max(int(np.ceil(MIN_STRETCH_S / dt_s - 1e-9)), max(5, round(SMOOTH_S / dt_s) | 1))
+    return sizes[segment] < min_rows
 
 
 def without_rows(log: FlightLog, drop: np.ndarray) -> FlightLog:
@@ -109,13 +138,57 @@ def without_rows(log: FlightLog, drop: np.ndarray) -> FlightLog:
     )  # fmt: skip
 
 
-def prepare(log: FlightLog, world: World, vehicle: Vehicle) -> FlightData:
+def leave_out(log: FlightLog, world: World, vehicle: Vehicle) -> tuple[FlightLog, dict]:
+    """The log without rows in contact with a surface and without airborne stretches too
+    short to smooth; what was left out, counted."""
+    rows = len(log.time_s)
+    dt = float(np.median(np.diff(log.time_s))) if rows > 1 else 0.0
     contact = touching(log, world, vehicle)
     if contact.any():  # the rows around them start new segments (time gaps)
         log = without_rows(log, contact)
+    short = short_stretches(log.time_s, dt) if dt > 0 else np.zeros(len(log.time_s), bool)
+    if short.any():
+        starts = np.concatenate([[True], np.diff(log.time_s) > GAP_PERIODS * dt])
+        stretches = int(np.sum(starts & short))
+        log = without_rows(log, short)
+    else:
+        stretches = 0
+    counts = {
+        "rows": rows,
+        "contact_rows": int(contact.sum()),
+        "short_stretches": stretches,
+        "short_rows": int(short.sum()),
+        "min_stretch_s": MIN_STRETCH_S,
+    }
+    return log, counts
+
+
+def describe_left_out(counts: dict) -> str:
+    """'left out: 3 stretches shorter than 0.2 s (41 rows), 120 rows in contact with a
+    surface (...)'."""
+    parts = []
+    if counts.get("short_stretches"):
+        parts.append(
+            f"{counts['short_stretches']} stretches shorter than {counts['min_stretch_s']:g} s "
+            f"({counts['short_rows']} rows)"
+        )
+    if counts.get("contact_rows"):
+        parts.append(
+            f"{counts['contact_rows']} rows in contact with a surface (the body within "
+            f"{CONTACT_MARGIN_M * 1000:g} mm of it)"
+        )
+    return "left out: " + (", ".join(parts) if parts else "nothing")
+
+
+def prepare(log: FlightLog, world: World, vehicle: Vehicle) -> FlightData:
+    raw_rows = len(log.time_s)
+    log, left_out = leave_out(log, world, vehicle)
     t = log.time_s
     if len(t) < 10:
-        raise ValueError(f"{log.name}: only {len(t)} rows; a flight log needs at least 10")
+        raise ValueError(
+            f"{log.name}: only {len(t)} of {raw_rows} rows are airborne and usable "
+            f"({describe_left_out(left_out)}); a flight log needs at least 10"
+        )
     dt = float(np.median(np.diff(t)))
     new_segment = np.concatenate([[True], np.diff(t) > GAP_PERIODS * dt])
     segment = np.cumsum(new_segment) - 1
@@ -155,4 +228,5 @@ def prepare(log: FlightLog, world: World, vehicle: Vehicle) -> FlightData:
         height_m=height_below_m(p_mid, world.obstacles, down),
         substeps=max(1, round(dt * world.physics_rate_hz)),
         meta=log.meta,
+        left_out=left_out,
     )

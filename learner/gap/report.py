@@ -18,7 +18,7 @@ from learner.gap.regimes import describe_range
 def corrected_world_yaml(nominal_yaml: str, diagnosis: Diagnosis) -> str:
     """The nominal world with the chosen effects (fitted parameters) added or replaced."""
     data = yaml.safe_load(nominal_yaml)
-    chosen = to_world_effects(diagnosis.chosen)
+    chosen = to_world_effects(diagnosis.chosen, diagnosis.vehicle)
     names = {e["name"] for e in chosen}
     kept = [e for e in data.get("effects") or [] if e.get("name") not in names]
     data["effects"] = kept + chosen
@@ -28,6 +28,9 @@ def corrected_world_yaml(nominal_yaml: str, diagnosis: Diagnosis) -> str:
 
 def figures(diagnosis: Diagnosis, closed_loop: dict[str, Any] | None) -> dict[str, Any]:
     return {
+        "vehicle": diagnosis.vehicle.name if diagnosis.vehicle else None,
+        "left_out": diagnosis.left_out,
+        "notes": all_notes(diagnosis, closed_loop),
         "fitting_flights": diagnosis.fitting,
         "held_out_flights": diagnosis.held_out,
         "noise_sd_n": diagnosis.noise_sd_n,
@@ -41,6 +44,40 @@ def figures(diagnosis: Diagnosis, closed_loop: dict[str, Any] | None) -> dict[st
         "gap": diagnosis.gap,
         "closed_loop": closed_loop,
     }
+
+
+def closed_loop_sentence(closed_loop: dict[str, Any] | None) -> str | None:
+    """The closed-loop replays in words: what was flown, skipped or failed, and why."""
+    if not closed_loop:
+        return None
+    status = closed_loop.get("status")
+    if status == "skipped":
+        return f"closed-loop replay skipped: {closed_loop['why']}"
+    failed = closed_loop.get("failed") or []
+    failures = "; ".join(f"{f['flight']} in the {f['world']} world: {f['reason']}" for f in failed)
+    if status == "failed":
+        return f"closed-loop replay failed, no figure: {failures}"
+    text = (
+        f"closed-loop tracking difference to the logged flights: "
+        f"{closed_loop['before_m'] * 1000:.1f} mm -> {closed_loop['after_m'] * 1000:.1f} mm, "
+        f"shrink {closed_loop['shrink'] * 100:.0f}% ({closed_loop['flights']} flights)"
+    )
+    return text + (f"; not flown: {failures}" if failures else "")
+
+
+def all_notes(diagnosis: Diagnosis, closed_loop: dict[str, Any] | None) -> list[str]:
+    """The diagnosis's fallbacks, the rows left out and the replays' fate, as sentences."""
+    notes = list(diagnosis.notes)
+    summary = diagnosis.left_out.get("summary")
+    if summary and summary != "left out: nothing":
+        notes.insert(0, summary)
+    sentence = closed_loop_sentence(closed_loop)
+    if sentence and closed_loop and (closed_loop["status"] != "flown" or closed_loop["failed"]):
+        notes.append(sentence)
+    for effect, e in diagnosis.effects.items():
+        if e["status"] == "at bound":
+            notes.append(f"{effect}: {e['why']}")
+    return notes
 
 
 def write_outputs(
@@ -144,6 +181,14 @@ def _recording(diagnosis: Diagnosis, path: Path) -> Path:
     return path
 
 
+def _scored_on(gap: dict[str, Any]) -> str:
+    if gap.get("in_sample"):
+        return "in-sample: one fitting flight, none held out"
+    if gap.get("cross_validated"):
+        return f"cross-validated over {gap['folds']} folds of the fitting flights"
+    return "on the held-out flights"
+
+
 def _markdown(
     diagnosis: Diagnosis,
     closed_loop: dict[str, Any] | None,
@@ -156,8 +201,15 @@ def _markdown(
         f"Nominal world `{world}`; fitting flights {', '.join(diagnosis.fitting)}; "
         f"held out {', '.join(diagnosis.held_out) or 'none (cross-validated)'}. Residual "
         f"noise {diagnosis.noise_sd_n * 1000:.2f} mN per component; effective samples "
-        f"{diagnosis.ess_ratio:.2f} per sample.",
+        f"{diagnosis.ess_ratio:.2f} per sample. Vehicle "
+        f"`{diagnosis.vehicle.name if diagnosis.vehicle else '?'}`; "
+        f"{diagnosis.left_out.get('summary', 'left out: nothing')}.",
         "",
+    ]
+    notes = all_notes(diagnosis, closed_loop)
+    if notes:
+        lines += ["## Notes", ""] + [f"- {n}" for n in notes] + [""]
+    lines += [
         "## Where",
         "",
     ]
@@ -174,6 +226,8 @@ def _markdown(
     for effect, e in diagnosis.effects.items():
         params = "; ".join(
             f"{p} {v['value']:.4g} ({v['ci95'][0]:.4g} to {v['ci95'][1]:.4g}) {v['unit']}"
+            if v.get("ci95")
+            else f"{p} {v['value']:.4g} (on its bound) {v['unit']}"
             for p, v in (e.get("parameters") or {}).items()
         )
         lines.append(f"| {effect} | {e['status']} | {params} | {e.get('why', '')} |")
@@ -181,8 +235,9 @@ def _markdown(
     lines += ["", "## How far", ""]
     f = g["force_rms_n"]
     lines.append(
-        f"- force gap (systematic RMS, noise removed): {f['before'] * 1000:.2f} mN -> "
-        f"{f['after'] * 1000:.2f} mN, shrink {f['shrink'] * 100:.0f}%"
+        f"- force gap (systematic RMS, noise removed; {_scored_on(g)}): "
+        f"{f['before'] * 1000:.2f} mN -> {f['after'] * 1000:.2f} mN, "
+        f"shrink {f['shrink'] * 100:.0f}%"
     )
     if "torque_rms_n_m" in g:
         q = g["torque_rms_n_m"]
@@ -198,12 +253,9 @@ def _markdown(
             f"{r['after'] * 1000:.1f} mm, shrink {r['shrink'] * 100:.0f}% (includes the noise "
             "of the logged start states)"
         )
-    if closed_loop:
-        lines.append(
-            f"- closed-loop tracking difference to the logged flights: "
-            f"{closed_loop['before_m'] * 1000:.1f} mm -> {closed_loop['after_m'] * 1000:.1f} mm, "
-            f"shrink {closed_loop['shrink'] * 100:.0f}%"
-        )
+    sentence = closed_loop_sentence(closed_loop)
+    if sentence:
+        lines.append(f"- {sentence}")
     regions = g.get("regions") or []
     if regions:
         lines += [

@@ -24,12 +24,18 @@ def smooth_per_segment(x: np.ndarray, segment: np.ndarray, window: int) -> np.nd
     """A centred moving average within each segment (edges average what they have)."""
     out = np.empty_like(x, dtype=float)
     kernel = np.ones(window)
+    start = (window - 1) // 2  # the centred part of the full convolution: numpy's "same"
+    # returns the longer of the two, which for a segment shorter than the window is not it
+
+    def centred(a: np.ndarray) -> np.ndarray:
+        return np.convolve(a, kernel, mode="full")[start : start + len(a)]
+
     for s in np.unique(segment):
         idx = np.flatnonzero(segment == s)
         part = x[idx].reshape(len(idx), -1)
-        counts = np.convolve(np.ones(len(idx)), kernel, mode="same")
+        counts = centred(np.ones(len(idx)))
         out[idx] = np.column_stack(
-            [np.convolve(part[:, j], kernel, mode="same") / counts for j in range(part.shape[1])]
+            [centred(part[:, j]) / counts for j in range(part.shape[1])]
         ).reshape(x[idx].shape)
     return out
 

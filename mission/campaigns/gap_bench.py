@@ -341,7 +341,11 @@ def summarise(results: list[dict[str, Any]], cases: list[Case]) -> dict[str, Any
             per_param[e] = {"median_error": float(np.median(ee)), "coverage": float(np.mean(cc))}
     shrinks = [r["force_shrink"] for r in ok if r["truth"] and not by_case[r["case"]].unexcited]
     nulls = [r for r in ok if r["false_alarm"] is not None]
-    closed = [r["closed_loop"]["shrink"] for r in ok if r["truth"] and r.get("closed_loop")]
+    closed = [
+        r["closed_loop"]["shrink"]
+        for r in ok
+        if r["truth"] and (r.get("closed_loop") or {}).get("status") == "flown"
+    ]
     return {
         "cases": len(results),
         "failed": len(results) - len(ok),

@@ -4,9 +4,12 @@ write every output."""
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from pathlib import Path
 from typing import Any
+
+import yaml
 
 from learner.flightlogs.readers import read_log
 from learner.flightlogs.tables import load_mapping
@@ -15,8 +18,8 @@ from learner.gap.report import corrected_world_yaml, figures, write_outputs
 from learner.gap.rollout import shrink, tracking_difference_m
 from mission.campaigns.gap_flights import fly_log
 from simbridge.config import ConfigError
-from simbridge.vehicle import load_vehicle
-from simbridge.world import load_world, resolve_world_path
+from simbridge.vehicle import Vehicle, load_vehicle, resolve_vehicle_path
+from simbridge.world import World, load_world, resolve_world_path
 
 
 def run_diagnosis(
@@ -26,16 +29,19 @@ def run_diagnosis(
     out: Path,
     folds: int = 3,
     columns: Path | None = None,
-    vehicle_name: str = "nano",
+    vehicle_name: str | None = None,
     replay: bool = True,
 ) -> dict[str, Any]:
-    """Diagnose, replay held-out missions closed-loop, write every output; the figures."""
+    """Diagnose, replay held-out missions closed-loop, write every output; the figures.
+    The vehicle is `vehicle_name`, else the world's `vehicle:` (the simulator's, nano by
+    default); a `vehicle_name` other than the world's is refused."""
     if folds < 2:
         raise ConfigError(f"--folds: {folds} is outside the allowed range [2, number of logs]")
     mapping = load_mapping(columns)
     world_path = resolve_world_path(world)
     world_obj = load_world(world_path)
-    vehicle = load_vehicle(vehicle_name)
+    vehicle = resolve_vehicle(world_path, world_obj, vehicle_name)
+    # read_log gains the vehicle (thrust logs into rotor speeds) on the flightlogs branch
     fit_logs = [read_log(p, mapping) for p in fitting]
     hold_logs = [read_log(p, mapping) for p in held_out]
     try:
@@ -43,31 +49,97 @@ def run_diagnosis(
     except ValueError as err:
         raise ConfigError(str(err)) from None
     out.mkdir(parents=True, exist_ok=True)
-    closed_loop = None
+    flown_world = world_with_vehicle(world_path, vehicle_name, out)
+    if flown_world != world_path:
+        diagnosis.notes.append(
+            f"the world names no vehicle: `vehicle: {vehicle_name}` is added to "
+            f"{flown_world.name} (the world the replays fly) and corrected_world.yaml"
+        )
     if replay:
         corrected = out / "corrected_world.yaml"
-        corrected.write_text(corrected_world_yaml(world_path.read_text(), diagnosis))
-        closed_loop = replay_missions(hold_logs, world_path, corrected, out / "replays")
-    write_outputs(diagnosis, out, world_path, closed_loop)
+        corrected.write_text(corrected_world_yaml(flown_world.read_text(), diagnosis))
+        closed_loop = replay_missions(hold_logs, flown_world, corrected, out / "replays")
+    else:
+        closed_loop = {"status": "skipped", "why": "not asked for (--no-replay)"}
+    write_outputs(diagnosis, out, flown_world, closed_loop)
     return figures(diagnosis, closed_loop)
 
 
-def replay_missions(logs: list, nominal: Path, corrected: Path, out: Path) -> dict | None:
-    """Fly each held-out log's mission in the nominal and the corrected world; the RMS
-    tracking difference to the logged flight before and after."""
+def _world_vehicle_key(world_path: Path) -> str | None:
+    data = yaml.safe_load(world_path.read_text())
+    return data.get("vehicle") if isinstance(data, dict) else None
 
-    before, after = [], []
-    for log in logs:
-        mission = log.meta.get("mission")
+
+def resolve_vehicle(world_path: Path, world: World, vehicle_name: str | None) -> Vehicle:
+    """`vehicle_name` if given, else the world's `vehicle:`; both given and different (in any
+    parameter but the name): refused, as the diagnosis and the simulator flying the world
+    must model one vehicle."""
+    if vehicle_name is None:
+        return load_vehicle(world.vehicle)
+    given = load_vehicle(vehicle_name)
+    key = _world_vehicle_key(world_path)
+    if key is not None:
+        own = load_vehicle(world.vehicle)
+        if dataclasses.replace(own, name=given.name) != given:
+            raise ConfigError(
+                f"--vehicle {vehicle_name} ({given.name}, {given.mass_kg:g} kg) is not the "
+                f"world's vehicle: {world_path} has `vehicle: {key}` ({own.name}, "
+                f"{own.mass_kg:g} kg); leave out --vehicle to use the world's, or change "
+                "the world's `vehicle:` key"
+            )
+    return given
+
+
+def world_with_vehicle(world_path: Path, vehicle_name: str | None, out: Path) -> Path:
+    """The world the replays fly: the nominal world itself, or, when it names no vehicle and
+    --vehicle was given, a copy naming it (the simulator would fly the nano otherwise)."""
+    if vehicle_name is None or _world_vehicle_key(world_path) is not None:
+        return world_path
+    data = yaml.safe_load(world_path.read_text()) or {}
+    vehicle_path = resolve_vehicle_path(vehicle_name)
+    data["vehicle"] = str(vehicle_path.resolve()) if vehicle_path.exists() else vehicle_name
+    path = out / "nominal_world.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def replay_missions(logs: list, nominal: Path, corrected: Path, out: Path) -> dict[str, Any]:
+    """Fly each held-out log's mission in the nominal and the corrected world; the RMS
+    tracking difference to the logged flight before and after. A flight that fails (the
+    corrected world cannot take off, lands nowhere, ...) is reported with its reason and
+    the others go on: the replays are one figure of the report, never its end."""
+    if not logs:
+        return {"status": "skipped", "why": "no held-out logs to replay"}
+    missions = [(log, log.meta.get("mission")) for log in logs]
+    if not any(m for _, m in missions):
+        return {"status": "skipped", "why": "the logs carry no mission"}
+    # keyed by the corrected world's content: a rerun reuses only the same world's flight
+    key = hashlib.sha256(corrected.read_bytes()).hexdigest()[:10]
+    before, after, failed = [], [], []
+    for log, mission in missions:
         if not mission or not Path(mission).exists():
+            why = "its log carries no mission" if not mission else f"mission {mission} not found"
+            failed.append({"flight": log.name, "world": "nominal", "reason": why})
             continue
-        a = read_log(fly_log(Path(mission), nominal, out / f"{log.name}-{nominal.stem}.csv"))
-        # keyed by the corrected world's content: a rerun reuses only the same world's flight
-        key = hashlib.sha256(corrected.read_bytes()).hexdigest()[:10]
-        b = read_log(fly_log(Path(mission), corrected, out / f"{log.name}-corrected-{key}.csv"))
-        before.append(tracking_difference_m(log, a))
-        after.append(tracking_difference_m(log, b))
+        flown = {}
+        for label, world, name in (
+            ("nominal", nominal, f"{log.name}-{nominal.stem}.csv"),
+            ("corrected", corrected, f"{log.name}-corrected-{key}.csv"),
+        ):
+            try:
+                flown[label] = read_log(fly_log(Path(mission), world, out / name))
+            except Exception as err:  # any failure of one flight is a figure, not the end
+                failed.append(
+                    {"flight": log.name, "world": label, "reason": f"{type(err).__name__}: {err}"}
+                )
+                break
+        if len(flown) == 2:
+            before.append(tracking_difference_m(log, flown["nominal"]))
+            after.append(tracking_difference_m(log, flown["corrected"]))
     if not before:
-        return None
+        return {"status": "failed", "failed": failed}
     bm, am = sum(before) / len(before), sum(after) / len(after)
-    return {"flights": len(before), "before_m": bm, "after_m": am, "shrink": shrink(bm, am)}
+    return {
+        "status": "flown", "flights": len(before), "before_m": bm, "after_m": am,
+        "shrink": shrink(bm, am), "failed": failed,
+    }  # fmt: skip

@@ -23,7 +23,11 @@ def add_parser(sub: Any) -> None:
     d.add_argument("--holdout", type=Path, nargs="+", default=[], help="logs to score only")
     d.add_argument("--folds", type=int, default=3, help="cross-validation folds over flights")
     d.add_argument("--columns", type=Path, help="column mapping YAML for other vehicles' logs")
-    d.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
+    d.add_argument(
+        "--vehicle",
+        help="vehicle YAML or packaged name (default: the world's `vehicle:`, else nano; "
+        "a vehicle other than the world's is refused)",
+    )
     d.add_argument("--no-replay", action="store_true", help="skip the closed-loop re-flights")
     d.add_argument("--out", type=Path, required=True, help="output folder")
     d.set_defaults(func=cmd_diagnose)
@@ -55,7 +59,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         not args.no_replay,
     )  # fmt: skip
     for effect, e in result["effects"].items():
-        print(f"{effect:20s} {e['status']}")
+        why = f" ({e['why']})" if e["status"] == "at bound" else ""
+        print(f"{effect:20s} {e['status']}{why}")
+    for note in result.get("notes") or []:
+        print(f"note: {note}")
     f = result["gap"]["force_rms_n"]
     print(f"force gap {f['before'] * 1000:.2f} -> {f['after'] * 1000:.2f} mN "
           f"(shrink {f['shrink'] * 100:.0f}%); report: {args.out / 'report.md'}")  # fmt: skip

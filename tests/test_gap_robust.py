@@ -1,0 +1,365 @@
+"""The gap diagnosis on logs that are not the bench's clean airborne flights: short stretches
+and contact left out and counted, a replay the corrected world cannot fly reported, an
+implausible residual and a vehicle conflict refused with the likely causes, every fallback
+stated, and a catalogue that scales with the vehicle. The logs are synthetic (written by the
+test from a smooth trajectory and the diagnosis's own force model) except where a replay
+flies through `fly`; the pipeline is the real one (`run_diagnosis`, or the CLI)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from scipy.spatial.transform import Rotation
+
+from learner.flightlogs.flightlog import FlightLog, write_log
+from learner.gap.candidates import catalogue, nominal_values, world_force
+from learner.gap.flightdata import prepare
+from mission.campaigns.gap_diagnosis import run_diagnosis
+from simbridge.config import ConfigError
+from simbridge.vehicle import GRAVITY_M_S2, Vehicle, load_vehicle
+from simbridge.world import load_world
+
+DT_S = 0.01
+NANO = load_vehicle("nano")
+
+
+def scaled_vehicle(vehicle: Vehicle, factor: float, name: str) -> Vehicle:
+    """`factor` times heavier with `factor` times the thrust coefficient (the same hover
+    rotor speed) and `factor` times the body's areas: the same relative forces."""
+    s = math.sqrt(factor)
+    return dataclasses.replace(
+        vehicle,
+        name=name,
+        mass_kg=vehicle.mass_kg * factor,
+        thrust_coefficient_n_s2=vehicle.thrust_coefficient_n_s2 * factor,
+        body_size_m=tuple(x * s for x in vehicle.body_size_m),
+        inertia_kg_m2=tuple(i * factor * factor for i in vehicle.inertia_kg_m2),
+    )
+
+
+def vehicle_file(vehicle: Vehicle, path: Path) -> Path:
+    data = {f.name: getattr(vehicle, f.name) for f in dataclasses.fields(vehicle)}
+    path.write_text(yaml.safe_dump({k: list(v) if isinstance(v, tuple) else v
+                                    for k, v in data.items()}))  # fmt: skip
+    return path
+
+
+def world_file(path: Path, vehicle: str | None = None, **extra: Any) -> Path:
+    data: dict[str, Any] = {"physics_rate_hz": 1000, "control_period_s": 0.004, **extra}
+    if vehicle is not None:
+        data["vehicle"] = vehicle
+    data.setdefault("effects", [])
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def trajectory(seconds: float, seed: int, low_m: float = 0.12) -> dict[str, np.ndarray]:
+    """A smooth Lissajous flight (speeds up to about 2 m/s, heights `low_m` to 0.8 m): time,
+    position, velocity, acceleration."""
+    rng = np.random.default_rng(seed)
+    ph = rng.uniform(0, 2 * np.pi, 3)
+    t = np.arange(0.0, seconds, DT_S)
+    w = np.array([0.9, 0.7, 0.5])
+    amp = np.array([2.0, 1.5, 0.5 * (0.8 - low_m)])
+    arg = w[None, :] * t[:, None] + ph[None, :]
+    p = amp * np.sin(arg)
+    p[:, 2] += low_m + amp[2]
+    v = amp * w * np.cos(arg)
+    a = -amp * w * w * np.sin(arg)
+    return {"t": t, "p": p, "v": v, "a": a}
+
+
+def synthetic_log(
+    name: str,
+    vehicle: Vehicle,
+    world_path: Path,
+    true: dict[str, np.ndarray],
+    seed: int,
+    seconds: float = 30.0,
+    meta: dict | None = None,
+) -> FlightLog:
+    """A flight along `trajectory` whose logged acceleration is what the diagnosis's force
+    model gives for a world with the effects `true` (the nominal world's included), with
+    a motion-capture pose's and an IMU's noise."""
+    rng = np.random.default_rng(seed + 1000)
+    tr = trajectory(seconds, seed)
+    f = tr["a"] + np.array([0.0, 0.0, GRAVITY_M_S2])  # specific force the thrust must give
+    zb = f / np.linalg.norm(f, axis=1, keepdims=True)
+    xb = np.array([1.0, 0.0, 0.0]) - zb[:, :1] * zb
+    xb /= np.linalg.norm(xb, axis=1, keepdims=True)
+    rot = np.stack([xb, np.cross(zb, xb), zb], axis=2)
+    q = Rotation.from_matrix(rot).as_quat()[:, [3, 0, 1, 2]]
+    scale = 1.0 + float(true["thrust_mass"][0]) if "thrust_mass" in true else 1.0
+    thrust = vehicle.mass_kg * np.linalg.norm(f, axis=1)
+    n = np.sqrt(thrust / (4.0 * vehicle.thrust_coefficient_n_s2 * scale))[:, None]
+    n = n * (1.0 + 0.02 * np.sin(np.outer(tr["t"], [1.3, 1.7, 2.3, 2.9])))
+    log = FlightLog(name, tr["t"], tr["p"], tr["v"], q, np.zeros((len(n), 3)), n,
+                    np.zeros_like(tr["p"]), meta=meta or {})  # fmt: skip
+    world = load_world(world_path)
+    d = prepare(log, world, vehicle)
+    assert len(d.time_s) == len(log.time_s)  # nothing left out: rows match
+    acc = world_force({**nominal_values(world.effects, vehicle), **true}, d, vehicle)
+    acc /= vehicle.mass_kg
+    acc[:, 2] -= GRAVITY_M_S2
+    return dataclasses.replace(
+        log,
+        position_m=log.position_m + rng.normal(0, 0.001, log.position_m.shape),
+        velocity_m_s=log.velocity_m_s + rng.normal(0, 0.01, log.velocity_m_s.shape),
+        acceleration_m_s2=acc + rng.normal(0, 0.1, acc.shape),
+    )
+
+
+def write_flights(folder: Path, vehicle: Vehicle, world: Path, true: dict, seeds=(0, 1, 2),
+                  **kw: Any) -> list[Path]:  # fmt: skip
+    folder.mkdir(parents=True, exist_ok=True)
+    return [
+        write_log(synthetic_log(f"f{s}", vehicle, world, true, s, **kw), folder / f"f{s}.csv")
+        for s in seeds
+    ]
+
+
+def cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "mission.cli", "gap", "diagnose", *args],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+
+
+# 1. short stretches and contact ------------------------------------------------------------
+
+
+def test_short_stretches_and_contact_with_any_surface_are_left_out_and_counted(
+    tmp_path: Path,
+) -> None:
+    """A flight that starts on the ground, bounces at touchdown (a 1-row and a 7-row hop
+    between contacts, and 15 rows after a logging gap) and ends resting on a box top: the
+    old pipeline stopped with 'cannot reshape array of size 15 into shape (1,3)'."""
+    box = {"kind": "box", "center_m": [5.0, 5.0, 0.05], "size_m": [0.4, 0.4, 0.1]}
+    world = world_file(tmp_path / "world.yaml", obstacles=[box])
+    rest_z = NANO.body_size_m[2] / 2.0
+    logs = []
+    for seed in (0, 1):
+        log = synthetic_log(f"f{seed}", NANO, world, {}, seed, seconds=20.0)
+        t0 = log.time_s[-1]
+
+        def rows(z: float, k: int, at: tuple[float, float] = (0.0, 0.0)) -> dict:
+            return {"p": np.tile([at[0], at[1], z], (k, 1)), "k": k}
+
+        # on the ground, hop 1 row, ground, hop 7 rows, ground, (gap) 15 rows, on the box
+        on_box = rows(0.1 + rest_z, 20, (5.0, 5.0))
+        tail = [rows(rest_z, 30), rows(0.03, 1), rows(rest_z, 5), rows(0.03, 7),
+                rows(rest_z, 10), None, rows(0.05, 15), on_box]  # fmt: skip
+        t, p, gap = [], [], 0.0
+        for part in tail:
+            if part is None:
+                gap = 1.0  # a logging gap of a second
+                continue
+            start = t0 + gap + DT_S * (1 + sum(len(x) for x in t))
+            t.append(start + DT_S * np.arange(part["k"]))
+            p.append(part["p"])
+        t_all, p_all = np.concatenate(t), np.concatenate(p)
+        k = len(t_all)
+        level = np.tile([1.0, 0.0, 0.0, 0.0], (k, 1))
+        log = FlightLog(
+            log.name, np.concatenate([log.time_s, t_all]),
+            np.vstack([log.position_m, p_all]), np.vstack([log.velocity_m_s, np.zeros((k, 3))]),
+            np.vstack([log.quaternion, level]), np.zeros((len(log.time_s) + k, 3)),
+            np.vstack([log.rotor_speeds_rad_s, np.full((k, 4), 20.0)]),
+            np.vstack([log.acceleration_m_s2, np.zeros((k, 3))]),
+        )  # fmt: skip
+        logs.append(write_log(log, tmp_path / f"f{seed}.csv"))
+    out = tmp_path / "out"
+    run_diagnosis(logs, [], str(world), out, folds=2, replay=False)
+    figures = json.loads((out / "gap.json").read_text())
+    left = figures["left_out"]
+    # per flight: contact 30 + 5 + 10 on the ground and 20 on the box; hops of 1 and 7 rows
+    # and the 15 rows after the gap are stretches shorter than 0.2 s
+    assert left["contact_rows"] == 2 * 65
+    assert left["short_stretches"] == 2 * 3
+    assert left["short_rows"] == 2 * 23
+    summary = "left out: 6 stretches shorter than 0.2 s (46 rows), 130 rows in contact"
+    assert left["summary"].startswith(summary)
+    assert summary in (out / "report.md").read_text()
+
+
+# 2. a replay the corrected world cannot fly --------------------------------------------------
+
+
+def test_a_corrected_world_that_cannot_fly_its_replay_is_reported_and_the_report_written(
+    tmp_path: Path,
+) -> None:
+    """Logs of a vehicle 15% short of thrust: the corrected world (C_T scale 0.85) cannot
+    leave the ground cushion under the autopilot's position loop (no integral action: 15% of
+    g is 1.5 m of height error), so its replay of the held-out mission never lands; the run
+    still writes every output and exits 0."""
+    # the replays' autopilot models a ground effect of rho 1: without one in the world it
+    # would never leave the ground
+    ge = [{"name": "ground_effect", "rho": 1.0}]
+    world = world_file(tmp_path / "world.yaml", vehicle="nano", effects=ge)
+    mission = tmp_path / "hover.yaml"
+    wp = {"position_m": [0.0, 0.0, 0.3], "hold_s": 1.0, "acceptance_radius_m": 0.05}
+    mission.write_text(yaml.safe_dump({"takeoff_altitude_m": 0.3, "land": True, "waypoints": [wp]}))
+    true = {"thrust_mass": np.array([-0.15])}
+    fit = write_flights(tmp_path / "logs", NANO, world, true, seeds=(0, 1), seconds=15.0)
+    held = write_flights(tmp_path / "logs", NANO, world, true, seeds=(2,), seconds=15.0,
+                         meta={"mission": str(mission)})  # fmt: skip
+    out = tmp_path / "out"
+    done = cli(*map(str, fit), "--holdout", str(held[0]), "--world", str(world),
+               "--folds", "2", "--out", str(out))  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    figures = json.loads((out / "gap.json").read_text())
+    assert figures["chosen"]["thrust_mass"][0] == pytest.approx(-0.15, abs=0.01)
+    closed = figures["closed_loop"]
+    assert closed["status"] == "failed"
+    (failure,) = closed["failed"]
+    assert failure["world"] == "corrected"
+    assert "did not land" in failure["reason"]
+    report = (out / "report.md").read_text()
+    assert "closed-loop replay failed" in report and "did not land" in report
+    assert "| thrust_coefficient | not identifiable |" in report  # the rest of the report
+    assert "closed-loop replay failed" in done.stdout
+
+
+# 3. implausible residuals, the world's vehicle -----------------------------------------------
+
+
+def test_gravity_left_in_the_accelerometer_stops_with_the_likely_causes(tmp_path: Path) -> None:
+    world = world_file(tmp_path / "world.yaml")
+    log = synthetic_log("g", NANO, world, {}, 0, seconds=10.0)
+    acc = log.acceleration_m_s2 + np.array([0.0, 0.0, GRAVITY_M_S2])
+    path = write_log(dataclasses.replace(log, acceleration_m_s2=acc), tmp_path / "g.csv")
+    done = cli(str(path), "--world", str(world), "--no-replay", "--out", str(tmp_path / "out"))
+    assert done.returncode == 2
+    assert "implausible for a flying vehicle" in done.stderr
+    assert "+1.00 times the weight" in done.stderr  # the measured figure
+    assert "gravity left in the accelerometer" in done.stderr
+    assert not (tmp_path / "out/gap.json").exists()
+
+
+def test_thrust_in_newtons_passed_as_rotor_speeds_stops_with_the_likely_causes(
+    tmp_path: Path,
+) -> None:
+    world = world_file(tmp_path / "world.yaml")
+    log = synthetic_log("n", NANO, world, {}, 0, seconds=10.0)
+    newtons = NANO.thrust_coefficient_n_s2 * log.rotor_speeds_rad_s**2
+    path = write_log(dataclasses.replace(log, rotor_speeds_rad_s=newtons), tmp_path / "n.csv")
+    with pytest.raises(ConfigError, match="newtons") as err:
+        run_diagnosis([path], [], str(world), tmp_path / "out", replay=False)
+    assert "+1.00 times the weight" in str(err.value)
+
+
+def test_the_worlds_vehicle_is_used_and_a_conflicting_vehicle_refused(tmp_path: Path) -> None:
+    big = vehicle_file(scaled_vehicle(NANO, 10.0, "big10"), tmp_path / "big10.yaml")
+    world = world_file(tmp_path / "world.yaml", vehicle=str(big))
+    logs = write_flights(tmp_path / "logs", load_vehicle(big), world, {}, seeds=(0, 1),
+                         seconds=10.0)  # fmt: skip
+    result = run_diagnosis(logs, [], str(world), tmp_path / "out", folds=2, replay=False)
+    assert result["vehicle"] == "big10"
+    done = cli(*map(str, logs), "--world", str(world), "--vehicle", "nano", "--no-replay",
+               "--out", str(tmp_path / "out2"))  # fmt: skip
+    assert done.returncode == 2
+    assert "is not the world's vehicle" in done.stderr and "big10" in done.stderr
+    # the same vehicle under another name is no conflict
+    renamed = vehicle_file(scaled_vehicle(NANO, 10.0, "other"), tmp_path / "other.yaml")
+    again = run_diagnosis(logs, [], str(world), tmp_path / "out3", 2, None, str(renamed), False)
+    assert again["vehicle"] == "other"
+
+
+# 4. fallbacks stated -------------------------------------------------------------------------
+
+
+def test_fallbacks_are_stated_one_fitting_flight_and_no_mission(tmp_path: Path) -> None:
+    world = world_file(tmp_path / "world.yaml")
+    true = {"body_drag": np.array([3.0])}
+    fit = write_flights(tmp_path / "logs", NANO, world, true, seeds=(0,), seconds=20.0)
+    held = write_flights(tmp_path / "logs", NANO, world, true, seeds=(1,), seconds=20.0)
+    out = tmp_path / "out"
+    done = cli(str(fit[0]), "--holdout", str(held[0]), "--world", str(world), "--folds", "3",
+               "--out", str(out))  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    figures = json.loads((out / "gap.json").read_text())
+    notes = " ".join(figures["notes"])
+    assert "closed-loop replay skipped: the logs carry no mission" in notes
+    assert "--folds 3 asked, but with one fitting flight" in notes
+    steps = [s for s in figures["search"] if "added" in s]
+    assert steps and all(s["cv_ev"] is None and "not computed" in s["cv_ev_note"] for s in steps)
+    assert "NaN" not in (out / "gap.json").read_text()
+    report = (out / "report.md").read_text()
+    assert "closed-loop replay skipped: the logs carry no mission" in report
+    assert "--folds 3 asked" in report
+    assert "note: closed-loop replay skipped" in done.stdout
+    # no held-out flight either: the gap is in-sample, and said so
+    alone = run_diagnosis(fit, [], str(world), tmp_path / "alone", folds=3, replay=False)
+    assert alone["gap"]["in_sample"] is True
+    assert "in-sample" in (tmp_path / "alone/report.md").read_text()
+
+
+# 5. a catalogue that scales with the vehicle --------------------------------------------------
+
+
+def test_the_catalogue_is_the_reference_for_nano_and_scales_with_the_vehicle() -> None:
+    from learner.gap.candidates import CANDIDATES
+
+    assert catalogue(NANO) == CANDIDATES
+    big = catalogue(scaled_vehicle(NANO, 10.0, "big10"))
+    assert big["rotor_drag"].hi[0] == pytest.approx(10 * CANDIDATES["rotor_drag"].hi[0])
+    assert big["wind"].hi == pytest.approx(CANDIDATES["wind"].hi)  # weight, frontal area x10
+    assert big["ground_effect"].hi[0] >= 21.0  # 17% more thrust at three rotor radii
+
+
+@pytest.mark.parametrize(
+    "effect, nano_value",
+    [("body_drag", np.array([3.0])), ("rotor_drag", np.array([8.8e-5, 8.8e-5, 4e-5]))],
+)
+def test_the_same_relative_effect_on_a_ten_times_heavier_vehicle_gives_the_same_answer(
+    tmp_path: Path, effect: str, nano_value: np.ndarray
+) -> None:
+    """Body drag C_d 3 (the same C_d on ten times the area) and rotor drag 4 catalogue
+    magnitudes (ten times the coefficient at the same rotor speeds): the same status and
+    relative parameters. With the nano's absolute bounds the heavy vehicle's C_d 30 sat on
+    the bound 5 and was reported absent."""
+    big = scaled_vehicle(NANO, 10.0, "big10")
+    answers = []
+    for vehicle, factor in ((NANO, 1.0), (big, 10.0)):
+        folder = tmp_path / vehicle.name
+        folder.mkdir()
+        path = vehicle_file(vehicle, folder / "vehicle.yaml")
+        world = world_file(folder / "world.yaml", vehicle=str(path))
+        value = nano_value * (1.0 if effect == "body_drag" else factor)
+        logs = write_flights(folder / "logs", vehicle, world, {effect: value}, seconds=20.0)
+        result = run_diagnosis(logs[:2], logs[2:], str(world), folder / "out", 2, replay=False)
+        statuses = {e: r["status"] for e, r in result["effects"].items()}
+        params = result["effects"][effect]["parameters"]
+        first = next(iter(params))
+        answers.append((statuses, params[first]["value"] / value[0]))
+    (nano_status, nano_rel), (big_status, big_rel) = answers
+    assert nano_status[effect] == "present"
+    assert big_status == nano_status
+    assert big_rel == pytest.approx(nano_rel, rel=0.05)
+
+
+def test_an_effect_beyond_the_catalogues_range_is_reported_at_its_bound(tmp_path: Path) -> None:
+    """A ground effect of rho 40 (38% more thrust at three rotor radii) against the bound 25:
+    'at bound' with the sentence, in the printed summary, report.md and gap.json."""
+    world = world_file(tmp_path / "world.yaml")
+    logs = write_flights(tmp_path / "logs", NANO, world, {"ground_effect": np.array([40.0])})
+    out = tmp_path / "out"
+    done = cli(*map(str, logs), "--world", str(world), "--folds", "3", "--no-replay",
+               "--out", str(out))  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    sentence = "rho reached its bound 25: the effect is stronger than the catalogue's range"
+    figures = json.loads((out / "gap.json").read_text())
+    ge = figures["effects"]["ground_effect"]
+    assert ge["status"] == "at bound"
+    assert sentence in ge["why"]
+    assert sentence in (out / "report.md").read_text()
+    assert "ground_effect        at bound (rho reached its bound 25" in done.stdout
