@@ -41,9 +41,9 @@ def run_diagnosis(
     world_path = resolve_world_path(world)
     world_obj = load_world(world_path)
     vehicle = resolve_vehicle(world_path, world_obj, vehicle_name)
-    # read_log gains the vehicle (thrust logs into rotor speeds) on the flightlogs branch
-    fit_logs = [read_log(p, mapping) for p in fitting]
-    hold_logs = [read_log(p, mapping) for p in held_out]
+    # the vehicle turns logged thrust into rotor speeds (its C_T)
+    fit_logs = [read_log(p, mapping, vehicle) for p in fitting]
+    hold_logs = [read_log(p, mapping, vehicle) for p in held_out]
     try:
         diagnosis = diagnose(fit_logs, hold_logs, world_obj, vehicle, folds)
     except ValueError as err:

@@ -18,11 +18,17 @@ def add_parser(sub: Any) -> None:
         dest="gap_command", required=True
     )
     d = g.add_parser("diagnose", help="residuals, effects and a corrected world from flight logs")
-    d.add_argument("logs", type=Path, nargs="+", help="flight logs (.csv, .parquet, .rrd)")
+    d.add_argument(
+        "logs", type=Path, nargs="+",
+        help="flight logs (.csv, .parquet, .rrd, .ulg, .bin, .tlog, Crazyflie microSD)",
+    )  # fmt: skip
     d.add_argument("--world", required=True, help="the nominal world (YAML or packaged name)")
     d.add_argument("--holdout", type=Path, nargs="+", default=[], help="logs to score only")
     d.add_argument("--folds", type=int, default=3, help="cross-validation folds over flights")
-    d.add_argument("--columns", type=Path, help="column mapping YAML for other vehicles' logs")
+    d.add_argument(
+        "--columns",
+        help="column mapping YAML or packaged name (crazyflie_z, crazyflie, neural_fly)",
+    )
     d.add_argument(
         "--vehicle",
         help="vehicle YAML or packaged name (default: the world's `vehicle:`, else nano; "
@@ -32,7 +38,10 @@ def add_parser(sub: Any) -> None:
     d.add_argument("--out", type=Path, required=True, help="output folder")
     d.set_defaults(func=cmd_diagnose)
     c = g.add_parser("convert", help="write any readable flight log in our format")
-    c.add_argument("log", type=Path, help="flight log (.csv, .parquet, .rrd, Crazyflie microSD)")
+    c.add_argument(
+        "log", type=Path,
+        help="flight log (.csv, .parquet, .rrd, .ulg, .bin, .tlog, Crazyflie microSD)",
+    )  # fmt: skip
     c.add_argument("out", type=Path, help="our format: .csv (with a .json sidecar) or .parquet")
     c.add_argument(
         "--columns",
