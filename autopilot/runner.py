@@ -290,6 +290,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 and cmd_state.phase == Phase.DISARMED
                 and t >= AUTO_ARM_AFTER_S
                 and cmd_state.touchdown_s is None
+                and not link.behind()  # caught up with a backlog of stand-time ticks
             ):
                 cmd_state, _ = requests.arm(cmd_state, t, state.position_m, None, False)
                 cmd_state, _ = requests.set_mode(
@@ -407,7 +408,6 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         model=tuning.model.name,
         malformed=link.malformed,
         unknown=link.unknown,
-        sim_ticks_skipped=link.skipped,
         gcs=gcs.counters.as_dict(),
         mission_items=len(station.items),
         **online_summary,

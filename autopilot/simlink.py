@@ -7,9 +7,10 @@ flight with `LinkLost`.
 
 Until the first reply the simulator streams its ticks at real-time pace (the vehicle on its
 stand), so an autopilot starved after connecting (a busy machine) finds a backlog of ticks.
-A tick with a newer one already received behind it is skipped (counted in `skipped`): the
-autopilot acts on the simulator's present, never on a queue of its past, whose replies the
-simulator would drop as stale anyway. In lockstep there is never more than one tick waiting.
+Every tick is still taken in order (the flight's rows stay those of an unstarved start), and
+`behind()` says whether more are already waiting: the runner arms a reproducible flight only
+once it has caught up, so that no take-off is commanded into replies the simulator drops as
+stale. In lockstep there is never more than one tick waiting.
 """
 
 from __future__ import annotations
@@ -75,7 +76,6 @@ class SimLink:
         )
         self._controls = [0.0] * 16
         self.received = 0  # messages decoded
-        self.skipped = 0  # ticks passed over for a newer one (a backlog before the first reply)
 
     @property
     def malformed(self) -> int:
@@ -98,9 +98,6 @@ class SimLink:
                 self._latest[kind] = fields
                 new.add(kind)
                 if kind == "HIL_SENSOR":
-                    if any(k == "HIL_SENSOR" for k, _ in self._queue):
-                        self.skipped += 1  # a newer tick waits behind it
-                        continue
                     return Step(fields, self._latest, new)
             data = self._poll()
             try:
@@ -120,6 +117,19 @@ class SimLink:
             frames = self._reader.feed(data)
             self.received += len(frames)
             self._queue.extend(frames)
+
+    def behind(self) -> bool:
+        """Whether another tick is already waiting (received, or in the socket): the autopilot
+        is working through a backlog. A peek, for the moments before arming only."""
+        if any(kind == "HIL_SENSOR" for kind, _ in self._queue):
+            return True
+        self._sock.setblocking(False)  # with a timeout set, recv would wait for data first
+        try:
+            return bool(self._sock.recv(1, socket.MSG_PEEK))
+        except (BlockingIOError, InterruptedError):
+            return False
+        except OSError:
+            return False  # the next receive reports it
 
     def _poll(self) -> bytes | None:
         """Busy-poll for up to SPIN_S before sleeping in the kernel: the simulator's step

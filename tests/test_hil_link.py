@@ -198,9 +198,11 @@ def test_a_signal_ends_the_simulator_cleanly_with_one_line(sim_process, sig):
     assert "Traceback" not in err
 
 
-def test_an_autopilot_starved_before_its_first_reply_acts_on_the_present_tick(sim_process):
+def test_an_autopilot_starved_before_its_first_reply_knows_it_is_behind_until_caught_up(
+    sim_process,
+):
     """Before the first reply the simulator streams ticks in real time; an autopilot that
-    reads them late takes the newest, and its reply puts the simulator in lockstep at once."""
+    reads them late takes every one in order, `behind()` while more wait, then lockstep."""
     import fcntl
     import termios
 
@@ -215,15 +217,15 @@ def test_an_autopilot_starved_before_its_first_reply_acts_on_the_present_tick(si
         return struct.unpack("i", fcntl.ioctl(link._sock, termios.FIONREAD, pending))[0]
 
     wait_for(lambda: waiting_bytes() > 4000, "a backlog of ticks", proc)  # tens of ticks
-    first = link.receive_step()
-    assert link.skipped >= 10
     channels = load_vehicle().actuator_channels
-    link.send(first.sensor["time_usec"], (0.0, 0.0, 0.0, 0.0), channels, False)
-    times = [first.sensor["time_usec"]]
-    for _ in range(20):
+    times, behind = [], []
+    for _ in range(400):
         times.append(link.receive_step().sensor["time_usec"])
+        behind.append(link.behind())
         link.send(times[-1], (0.0, 0.0, 0.0, 0.0), channels, False)
+        if len(behind) > 20 and not any(behind[-20:]):
+            break
     link.close()
-    # after at most one more tick already on its way, one tick per reply: lockstep
-    steps = np.diff(times[2:])
-    assert np.all(steps == steps[0]) and steps[0] == 4000
+    assert sum(behind) >= 10 and behind[0]  # it knew it was working through a backlog
+    assert not any(behind[-20:])  # and then caught up: one tick per reply
+    assert np.all(np.diff(times) == 4000)  # every tick, in order, none skipped
