@@ -112,8 +112,9 @@ def _unpack(x: np.ndarray, names: tuple[str, ...]) -> Values:
     return out
 
 
-def fit(problem: Problem, names: tuple[str, ...]) -> Fit:
-    """Least squares of the candidates `names` (with the nominal world's other effects)."""
+def fit(problem: Problem, names: tuple[str, ...], max_nfev: int | None = None) -> Fit:
+    """Least squares of the candidates `names` (with the nominal world's other effects);
+    `max_nfev`: at most this many evaluations (an approximate fit is enough)."""
     rows = [slice(None, None, STRIDE)] * len(problem.flights)
     target = np.concatenate([r[s].ravel() for r, s in zip(problem.residuals, rows, strict=True)])
     n = len(target)
@@ -131,7 +132,7 @@ def fit(problem: Problem, names: tuple[str, ...]) -> Fit:
         pred = problem.predicted(_unpack(x * scale, names))
         return np.concatenate([p[s].ravel() for p, s in zip(pred, rows, strict=True)]) - target
 
-    sol = least_squares(fun, x0, bounds=(lo, hi), diff_step=1e-4, x_scale=1.0)
+    sol = least_squares(fun, x0, bounds=(lo, hi), diff_step=1e-4, x_scale=1.0, max_nfev=max_nfev)
     rss = float(sol.fun @ sol.fun)
     p = len(x0)
     sigma2 = rss / max(n - p, 1)
