@@ -265,6 +265,7 @@ def test_sitl_takes_off_flies_offboard_and_a_fence_breach_returns_home():
         stderr=subprocess.PIPE,
         text=True,
         cwd=REPO,
+        start_new_session=True,  # its simulator and autopilot with it, should it hang
     )
     gs = station
     try:
@@ -305,7 +306,11 @@ def test_sitl_takes_off_flies_offboard_and_a_fence_breach_returns_home():
         assert any("failsafe: geofence" in t for t in gs.progress.texts), gs.progress.texts
     finally:
         sitl.send_signal(signal.SIGINT)
-        out, err = sitl.communicate(timeout=30)
+        try:
+            out, err = sitl.communicate(timeout=30)
+        except subprocess.TimeoutExpired:  # never leave it running for the next tests
+            os.killpg(sitl.pid, signal.SIGKILL)
+            out, err = sitl.communicate()
         station.close()
     assert sitl.returncode == 0, err
     assert f"udp 127.0.0.1:{port}" in out and "Ctrl-C" in out
