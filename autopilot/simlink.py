@@ -21,12 +21,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from simbridge.hil import ARMED_MODE, LOCKSTEP_FLAG, mavlink
+from simbridge.spin import SpinPolicy
 from simbridge.wire import FrameReader, PacketSequence, WirePacker
 
 AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID = 1, 1
-
-
-SPIN_S = 0.0005
 
 
 class LinkLost(Exception):
@@ -75,6 +73,7 @@ class SimLink:
             PacketSequence(),
         )
         self._controls = [0.0] * 16
+        self._spin = SpinPolicy()
         self.received = 0  # messages decoded
 
     @property
@@ -132,11 +131,14 @@ class SimLink:
             return False  # the next receive reports it
 
     def _poll(self) -> bytes | None:
-        """Busy-poll for up to SPIN_S before sleeping in the kernel: the simulator's step
-        takes about 100 us, and waking a sleeping process costs about 30 us here."""
+        """Busy-poll briefly before sleeping in the kernel, on an otherwise idle machine only
+        (simbridge/spin.py): the simulator's step takes about 100 us."""
+        spin_s = self._spin.spin_s()
+        if not spin_s:
+            return None
         sock = self._sock
         sock.setblocking(False)
-        end = time.perf_counter() + SPIN_S
+        end = time.perf_counter() + spin_s
         while time.perf_counter() < end:
             try:
                 return sock.recv(65536)

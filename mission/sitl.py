@@ -15,8 +15,10 @@ from pathlib import Path
 import yaml
 
 from simbridge.config import ConfigError
-from simbridge.launch import finish, start_sim
+from simbridge.launch import start_sim, supervised_options
 from simbridge.world import load_world, resolve_world_path
+
+STOP_WAIT_S = 5.0  # for each process to end on its signal before it is killed
 
 
 def parse_location(text: str) -> tuple[float, float, float, float]:
@@ -67,7 +69,7 @@ def run_sitl(
             located_world(world, location, Path(tmp)) if location else resolve_world_path(world)
         )
         o = load_world(world_path).origin
-        sim, port = start_sim(world_path, speedup=speedup, extra=["--wait"])
+        sim, port = start_sim(world_path, speedup=speedup, extra=["--wait"], supervised=True)
         cmd = [
             sys.executable, "-m", "mission.cli", "autopilot",
             "--sim", f"tcp:127.0.0.1:{port}",
@@ -76,30 +78,42 @@ def run_sitl(
             "--record-world", str(world_path),  # ignored when not recording
             *autopilot_options,
         ]  # fmt: skip
-        autopilot = subprocess.Popen(cmd)
+        autopilot = subprocess.Popen(cmd, **supervised_options())
         say(f"groundfx sitl: simulator on tcp:127.0.0.1:{port} ({world_path}, speed {speedup})")
         say(f"groundfx sitl: vehicle 1 at {o.lat_deg:.7f}, {o.lon_deg:.7f}, {o.alt_m:g} m")
         for url in gcs_urls:
             say(f"groundfx sitl: ground stations: {connect_hint(url)}")
         say("groundfx sitl: Ctrl-C to stop")
         stop: list[int] = []
-        previous = signal.signal(signal.SIGTERM, lambda signum, frame: stop.append(signum))
+        previous = {
+            sig: signal.signal(sig, lambda signum, frame: stop.append(signum))
+            for sig in (signal.SIGINT, signal.SIGTERM)
+        }
         try:
             while not stop and autopilot.poll() is None and sim.poll() is None:
-                time.sleep(0.2)
-        except KeyboardInterrupt:
-            pass
+                time.sleep(0.05)
         finally:
-            signal.signal(signal.SIGTERM, previous)
-            if autopilot.poll() is None:
-                autopilot.send_signal(signal.SIGINT)
-                try:
-                    autopilot.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    autopilot.kill()
-            say(finish(sim))
-        ended_by_user = bool(stop) or autopilot.returncode in (0, -signal.SIGINT)
-        return 0 if ended_by_user else (autopilot.returncode or 1)
+            stop_in_order(autopilot, sim)
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+        if stop:
+            say(f"groundfx sitl: stopped by {signal.Signals(stop[0]).name}")
+            return 0
+        say(f"groundfx sitl: the autopilot ended (exit code {autopilot.returncode})")
+        return 0 if autopilot.returncode == 0 else (autopilot.returncode or 1)
+
+
+def stop_in_order(autopilot: subprocess.Popen, sim: subprocess.Popen[str]) -> None:
+    """The autopilot first (it closes its recording and links), then the simulator, which
+    waits for the next autopilot until told to stop; each killed after STOP_WAIT_S."""
+    for proc, sig in ((autopilot, signal.SIGINT), (sim, signal.SIGTERM)):
+        if proc.poll() is None:
+            proc.send_signal(sig)
+        try:
+            proc.communicate(timeout=STOP_WAIT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
 
 
 def connect_hint(url: str) -> str:

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import ctypes
+import signal
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 LISTENING = "groundfx sim: listening on tcp:"
 
@@ -19,8 +22,10 @@ def start_sim(
     speedup: str = "max",
     start: str | None = None,
     extra: list[str] | None = None,
+    supervised: bool = False,
 ) -> tuple[subprocess.Popen[str], int]:
-    """The simulator process and the TCP port it listens on (it prints it first)."""
+    """The simulator process and the TCP port it listens on (it prints it first).
+    `supervised`: see `supervised_options`."""
     cmd = [
         sys.executable,
         "-m",
@@ -36,7 +41,10 @@ def start_sim(
     if start is not None:
         cmd.append(f"--start={start}")  # a leading minus would read as an option
     cmd += extra or []
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    options = supervised_options() if supervised else {}
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **options
+    )
     assert proc.stdout is not None
     line = proc.stdout.readline()
     if not line.startswith(LISTENING):
@@ -55,3 +63,16 @@ def finish(proc: subprocess.Popen[str], timeout_s: float = 10.0) -> str:
         out, _ = proc.communicate()
     lines = [ln for ln in out.splitlines() if ln.strip()]
     return lines[-1] if lines else ""
+
+
+def supervised_options() -> dict[str, Any]:
+    """Popen options for a child its parent stops in order (`groundfx sitl`): in a process
+    group of its own, so a terminal's Ctrl-C reaches only the parent, and (on Linux) sent
+    SIGTERM if the parent dies without stopping it, so nothing is left holding ports."""
+    return {"process_group": 0, "preexec_fn": _terminate_with_parent}
+
+
+def _terminate_with_parent() -> None:
+    if sys.platform.startswith("linux"):
+        pr_set_pdeathsig = 1
+        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGTERM))

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 from simbridge.hil import ActuatorCommand, HilEncoder, decode_actuators, mavlink
 from simbridge.physics import Simulation
+from simbridge.spin import SpinPolicy
 from simbridge.vehicle import Vehicle
 from simbridge.wire import FrameReader
 from simbridge.world import World
@@ -42,9 +43,6 @@ class LinkCounters:
     stale: int = 0  # lockstep replies to an earlier step than the last one sent
 
 
-SPIN_S = 0.0005  # longest busy-poll for a reply before sleeping in the kernel
-
-
 class LinkEnded(Exception):
     """The run is over; the message says why in one line. A timeout is not a clean end."""
 
@@ -64,6 +62,7 @@ class SimServer:
         self.world, self.vehicle, self.options, self.say = world, vehicle, options, say
         self.counters = LinkCounters()
         self._reader = FrameReader(mavlink)
+        self._spin = SpinPolicy()
         self._listener: socket.socket | None = None
         self.sim_time_s = 0.0
         self.wall_s = 0.0
@@ -156,10 +155,8 @@ class SimServer:
         within `wait_s`; counts and drops everything else, stale replies included (a reply
         that arrives a step late must not leave the autopilot one step behind for good)."""
         if wait_s > 0.0:
-            # Busy-poll briefly first: a lockstep reply usually comes within a few hundred
-            # microseconds, and waking a sleeping process costs about 30 us on this kind of
-            # machine, a sixth of the whole step at 20x real time.
-            command = self._poll(conn, SPIN_S, not_before_us)
+            spin_s = self._spin.spin_s()  # simbridge/spin.py: only on an otherwise idle machine
+            command = self._poll(conn, spin_s, not_before_us) if spin_s else None
             if command is not None:
                 return command
         deadline = time.perf_counter() + wait_s

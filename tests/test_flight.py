@@ -44,14 +44,12 @@ def test_hover_at_one_metre_holds_within_a_centimetre(tmp_path):
     assert np.max(np.hypot(x[settled], y[settled])) < 0.01
 
 
-def test_holding_3_cm_over_rho_2_ground_analytic_beats_none_by_far():
-    # the models compared on the reproducible path (ground-station flights: test_gcs.py)
+def test_holding_3_cm_over_rho_2_ground_analytic_holds_within_5_mm_and_lands_softly():
+    # the reproducible path (ground-station flights: test_gcs.py); `none` against analytic
+    # and neural on the same ground: tests/test_learner.py's closed-loop trials
     analytic = fly(EXAMPLES / "low_hover.yaml", world="rho2", model="analytic", via_gcs=False)
-    none = fly(EXAMPLES / "low_hover.yaml", world="rho2", model="none", via_gcs=False)
-    assert analytic["landed"] and none["landed"] and analytic["rho"] == 2.0
+    assert analytic["landed"] and analytic["rho"] == 2.0
     assert analytic["hold_z_rms_error_m"] < 0.005 and analytic["hold_z_max_error_m"] < 0.005
-    assert none["hold_z_rms_error_m"] > 0.02
-    assert none["hold_z_rms_error_m"] > 10 * analytic["hold_z_rms_error_m"]
     assert analytic["bounce_m"] < 0.001 and analytic["touchdown_speed_m_s"] < 0.2
     assert analytic["landing_error_m"] < 0.02
 

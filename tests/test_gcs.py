@@ -309,11 +309,12 @@ def test_sitl_takes_off_flies_offboard_and_a_fence_breach_returns_home():
         try:
             out, err = sitl.communicate(timeout=30)
         except subprocess.TimeoutExpired:  # never leave it running for the next tests
-            os.killpg(sitl.pid, signal.SIGKILL)
+            os.killpg(sitl.pid, signal.SIGKILL)  # its children end with it (PDEATHSIG)
             out, err = sitl.communicate()
         station.close()
     assert sitl.returncode == 0, err
     assert f"udp 127.0.0.1:{port}" in out and "Ctrl-C" in out
+    assert out.strip().splitlines()[-1] == "groundfx sitl: stopped by SIGINT"
 
 
 def send_target(gs: GroundStation, ned: tuple[float, float, float]) -> None:

@@ -144,14 +144,17 @@ def test_bad_model_files_are_refused(tmp_path):
 
 
 def test_neural_closes_the_gap_between_none_and_analytic_in_closed_loop():
-    """Thesis experiment 4.1 on the trained rho: four seeded landing trials per model (the
-    ten of `groundfx learn evaluate` and the campaign of `groundfx experiment 4.1` are
-    commands; a `none` landing alone takes 65 simulated seconds)."""
-    result = evaluate_models(list(range(4)), "rho2", "rho2", say=lambda _line: None)
+    """Thesis experiment 4.1 on the trained rho, two seeded landing trials per model (the ten
+    of `groundfx learn evaluate` and the campaign of `groundfx experiment 4.1` are commands,
+    with their Welch test; a `none` landing alone takes 90 simulated seconds). The models are
+    far apart, so every trial is judged: each neural hold beats every `none` hold, and
+    analytic (the simulator's own model) beats `none` tenfold."""
+    result = evaluate_models([0, 1], "rho2", "rho2", say=lambda _line: None)
     errors = {k: np.array(v) for k, v in result["errors_m"].items()}
     assert result["gap_closed"] >= 0.9, {k: v.mean() for k, v in errors.items()}
-    assert result["welch_p"] < 0.01
-    assert errors["neural"].mean() < errors["none"].mean()
+    assert errors["neural"].max() < errors["none"].min()
+    assert errors["none"].min() > 0.02
+    assert errors["none"].min() > 10 * errors["analytic"].max()
 
 
 def test_prediction_plot_and_inference_benchmark(tmp_path):
