@@ -20,7 +20,8 @@ demo: install
 
 test: install
 	$(BIN)/ruff check .
-	$(BIN)/pytest -q
+# two workers, a test file each: a flight's two processes take turns on one core
+	$(BIN)/pytest -q -n 2 --dist loadfile
 
 bench: install
 	$(BIN)/groundfx bench sim --json

@@ -96,7 +96,9 @@ def fly(
     options += autopilot_options  # e.g. the experiments' --online METHOD
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
-    sim, port = start_sim(resolve_world_path(world), speedup=speedup, start=start)
+    sim, port = start_sim(
+        resolve_world_path(world), speedup=speedup, start=start, lockstep_start=True
+    )
     gcs: dict[str, Any] = {}
     try:
         if station is None:

@@ -23,8 +23,10 @@ def start_sim(
     start: str | None = None,
     extra: list[str] | None = None,
     supervised: bool = False,
+    lockstep_start: bool = False,
 ) -> tuple[subprocess.Popen[str], int]:
     """The simulator process and the TCP port it listens on (it prints it first).
+    `lockstep_start`: for our own autopilot's reproducible flights (`groundfx sim --help`);
     `supervised`: see `supervised_options`."""
     cmd = [
         sys.executable,
@@ -40,6 +42,8 @@ def start_sim(
     ]
     if start is not None:
         cmd.append(f"--start={start}")  # a leading minus would read as an option
+    if lockstep_start:
+        cmd.append("--lockstep-start")
     cmd += extra or []
     options = supervised_options() if supervised else {}
     proc = subprocess.Popen(

@@ -30,6 +30,10 @@ class ServerOptions:
     speedup: float | None = 1.0  # simulated seconds per wall second; None: as fast as possible
     timeout_s: float = 10.0  # longest wait for an autopilot's reply in lockstep
     wait: bool = False  # after an autopilot leaves, wait for the next one (a fresh world)
+    # Lockstep from the first tick: wait for the reply to the first state before stepping.
+    # Flights are then the same to the bit however slowly the autopilot starts; PX4 needs its
+    # clock running before it replies, so by default the clock runs in real time until then.
+    lockstep_start: bool = False
 
 
 @dataclass
@@ -116,14 +120,18 @@ class SimServer:
             encoder = HilEncoder(world, self.vehicle)
             command: ActuatorCommand | None = None
             period = world.control_period_s
-            wall0 = time.perf_counter()
+            wall0 = pace0 = time.perf_counter()
             try:
                 self._send(conn, encoder.encode(sim.state(), sim.time_us))
                 while True:
                     if command is None:  # before the first actuators: real-time pace, no waiting
-                        command = self._receive(conn, period, False)
+                        if options.lockstep_start:
+                            command = self._receive(conn, options.timeout_s, True)
+                        else:
+                            command = self._receive(conn, period, False)
                         if command is not None:
                             sim.release()
+                            pace0 = time.perf_counter() - sim.time_s / (options.speedup or 1.0)
                     elif command.lockstep:
                         command = (
                             self._receive(conn, options.timeout_s, True, sim.time_us) or command
@@ -134,7 +142,7 @@ class SimServer:
                     self.counters.steps += 1
                     self.sim_time_s = sim.time_s
                     if options.speedup is not None and command is not None:
-                        lag = wall0 + sim.time_s / options.speedup - time.perf_counter()
+                        lag = pace0 + sim.time_s / options.speedup - time.perf_counter()
                         if lag > 0.0:
                             time.sleep(lag)
                     self._send(conn, encoder.encode(sim.state(), sim.time_us, sim.effect_forces()))

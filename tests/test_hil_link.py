@@ -171,6 +171,21 @@ def test_a_silent_autopilot_ends_lockstep_after_the_timeout(sim_process):
     conn.close()
 
 
+def test_with_lockstep_start_the_clock_waits_for_the_first_reply(sim_process):
+    """`fly`'s flights: however late the autopilot's first reply (a starved start), the
+    simulator has sent only the first state, so the flight is the same to the bit."""
+    proc, port = sim_process(lockstep_start=True, speedup="1", extra=["--timeout", "1"])
+    conn = connect(port)
+    seen: dict[str, int] = {}
+    first = next_of(conn, {"HIL_SENSOR"}, seen)
+    last = finish(proc, timeout_s=10)  # never answered: the wait for the first reply ends
+    while (msg := conn.recv_match(blocking=False)) is not None:  # all it sent before it ended
+        seen[msg.get_type()] = seen.get(msg.get_type(), 0) + 1
+    assert first.time_usec == 0 and seen["HIL_SENSOR"] == 1
+    assert "no HIL_ACTUATOR_CONTROLS for 1 s; 0 steps" in last, last
+    conn.close()
+
+
 def test_free_running_without_the_lockstep_flag_does_not_wait(sim_process):
     proc, port = sim_process(start="0,0,1", speedup="10")
     conn = connect(port)

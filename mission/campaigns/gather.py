@@ -53,7 +53,7 @@ def gather(
         bar.update(n - counted[0])
         counted[0] = n
 
-    sim, port = start_sim(world_path, speedup="max")
+    sim, port = start_sim(world_path, speedup="max", lockstep_start=True)
     config = AutopilotConfig(
         sim_url=f"tcp:127.0.0.1:{port}",
         vehicle=vehicle,

@@ -43,6 +43,12 @@ def add_parser(sub: Any) -> None:
         action="store_true",
         help="after an autopilot leaves, wait for the next one in a fresh world",
     )
+    p.add_argument(
+        "--lockstep-start",
+        action="store_true",
+        help="wait for the autopilot's reply to the first state before the clock runs "
+        "(reproducible flights; not for PX4, which needs a running clock to boot)",
+    )
     p.set_defaults(func=cmd_sim)
 
 
@@ -64,6 +70,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
             speedup=args.speedup,
             timeout_s=args.timeout,
             wait=args.wait,
+            lockstep_start=args.lockstep_start,
         ),
     )
     try:
