@@ -14,10 +14,12 @@ and ignored.
 from __future__ import annotations
 
 import contextlib
+import errno
 import socket
 from dataclasses import dataclass, field
 from typing import Any
 
+from autopilot.port_owner import port_owner
 from autopilot.signing import SignedMAVLink, Signing
 from simbridge.config import ConfigError
 from simbridge.hil import mavlink as mav
@@ -122,12 +124,17 @@ class GcsLink:
                 sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)
                 if scheme == "udpin":
-                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                    # no SO_REUSEADDR: with it a second vehicle on this port starts silently
+                    # and takes the first one's ground-station traffic
                     sock.bind((host, port))
                 else:
                     sock.bind(("0.0.0.0", 0))
         except OSError as e:
-            raise ConfigError(f"{url}: cannot open: {e.strerror}") from None
+            held = ""
+            if e.errno == errno.EADDRINUSE:
+                owner = port_owner(port, "tcp" if scheme == "tcpin" else "udp")
+                held = f" (held by {owner})" if owner else ""
+            raise ConfigError(f"{url}: cannot open port {port}: {e.strerror}{held}") from None
         sock.setblocking(False)
         destination = (host, port) if scheme == "udpout" else None
         return Endpoint(url, scheme, sock, self._new_mavlink(), destination)

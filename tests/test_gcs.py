@@ -323,3 +323,22 @@ def send_target(gs: GroundStation, ned: tuple[float, float, float]) -> None:
         0, 1, 1, mav.MAV_FRAME_LOCAL_NED, ignore_velocity_acceleration_yaw_rate,
         *ned, 0, 0, 0, 0, 0, 0, float("nan"), 0,
     )  # fmt: skip
+
+
+def test_a_ground_station_port_in_use_is_refused_naming_what_holds_it():
+    """A second vehicle on a port another holds (a second sitl beside a first) must not start
+    silently and take its ground-station traffic."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as holder:
+        holder.bind(("127.0.0.1", 0))
+        port = holder.getsockname()[1]
+        r = subprocess.run(
+            [sys.executable, "-m", "mission.cli", "autopilot", "--sim", "tcp:127.0.0.1:9",
+             "--no-record", "--out", f"udpin:127.0.0.1:{port}"],
+            capture_output=True, text=True, timeout=120, cwd=REPO,
+        )  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith(
+        f"groundfx autopilot: error: udpin:127.0.0.1:{port}: cannot open port {port}: "
+        f"Address already in use (held by pid {os.getpid()}: "
+    ), last
