@@ -371,11 +371,12 @@ def command(
     state = _reached(dataclasses.replace(state, carrot_m=carrot), params, time_s, position_m)
     if state.phase == Phase.TAKING_OFF and state.reached_s is not None:
         state = phase_to(state, Phase.FLYING, time_s)
-        if state.mode == FlightMode.TAKEOFF:
-            state = dataclasses.replace(state, mode=FlightMode.HOLD)
-            events.append("take-off complete: holding")
-        elif state.mode == FlightMode.MISSION and state.plan[state.current].kind != "takeoff":
+        if state.mode == FlightMode.MISSION and state.plan[state.current].kind != "takeoff":
             state = dataclasses.replace(state, target_m=None, reached_s=None)  # on to item 1
+    if state.mode == FlightMode.TAKEOFF and state.reached_s is not None:
+        # also a take-off mode chosen in the air: it climbs to the altitude, then holds
+        state = dataclasses.replace(state, mode=FlightMode.HOLD)
+        events.append("take-off complete: holding")
     if state.phase in (Phase.FLYING, Phase.HOLDING):
         holding = state.reached_s is not None
         phase = Phase.HOLDING if holding else Phase.FLYING

@@ -288,7 +288,9 @@ class GroundStation:
             else:
                 verdict = requests.Verdict(DENIED, f"ARM_DISARM param1 {p[0]:g}: expected 0 or 1")
         elif c == mav.MAV_CMD_NAV_TAKEOFF:
-            if cmd.phase not in (Phase.ARMED,) and not requests.airborne(cmd):
+            if requests.airborne(cmd):  # as ArduCopter: never left climbing in a take-off mode
+                verdict = requests.Verdict(DENIED, "take-off denied: already flying")
+            elif cmd.phase != Phase.ARMED:
                 verdict = requests.Verdict(DENIED, "take-off denied: arm first")
             else:
                 altitude = None

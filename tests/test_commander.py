@@ -121,3 +121,20 @@ def test_a_waypoint_never_reached_is_held_anyway_after_its_timeout():
         t += 0.004
         c = command(c.state, params, t, stuck, stuck[2], REST)
     assert c.state.phase == Phase.LANDING and t == pytest.approx(5.0, abs=0.1)
+
+
+def test_a_take_off_mode_chosen_in_the_air_climbs_to_the_altitude_then_holds():
+    """Not left in TAKEOFF (MAVProxy's `takeoff` while hovering stayed in AUTO.TAKEOFF)."""
+    s, _ = requests.arm(CommanderState(), 0.0, (0.0, 0.0, REST), None, False)
+    s, _ = requests.set_mode(s, FlightMode.TAKEOFF, 0.0, (0.0, 0.0, REST), PARAMS)
+    c = step(s, 0.1, (0.0, 0.0, REST))
+    c = step(c, 0.31, (0.0, 0.0, REST))
+    c = step(c, 4.0, (0.0, 0.0, 1.0))
+    assert c.state.mode == FlightMode.HOLD and "take-off complete: holding" in c.events
+    s, verdict = requests.set_mode(c.state, FlightMode.TAKEOFF, 5.0, (0.4, 0.0, 0.5), PARAMS)
+    assert verdict.accepted and s.mode == FlightMode.TAKEOFF  # pulled down to 0.5 m meanwhile
+    c = step(s, 5.004, (0.4, 0.0, 0.5))
+    assert c.state.mode == FlightMode.TAKEOFF
+    assert c.setpoint.position_m == pytest.approx((0.4, 0.0, 1.0126))  # back up, not home
+    c = step(c, 9.0, (0.4, 0.0, 1.0126))
+    assert c.state.mode == FlightMode.HOLD and "take-off complete: holding" in c.events

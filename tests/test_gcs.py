@@ -280,6 +280,13 @@ def test_sitl_takes_off_flies_offboard_and_a_fence_breach_returns_home():
             lambda m: m.get_type() == "GLOBAL_POSITION_INT" and 950 < m.relative_alt < 1100,
             30.0,
         )
+        # a second take-off in the air is denied, saying why (not left hanging in a mode)
+        again = gs.command(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, float("nan"), 0, 0, 5.0)
+        assert again == mav.MAV_RESULT_DENIED
+        if not any("already flying" in text for text in gs.progress.texts):
+            gs.wait_for(
+                "the reason", lambda m: m.get_type() == "STATUSTEXT" and "already" in m.text, 5.0
+            )
         # offboard: a stream of setpoints first, then the mode (PX4's rule)
         target_ned = (0.0, 0.6, -1.0)  # 0.6 m east
         for _ in range(5):
