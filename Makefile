@@ -8,7 +8,7 @@ BIN    := $(VENV)/bin
 $(BIN)/groundfx: pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -c constraints.txt -e '.[dev,ray]'
+	$(BIN)/pip install --quiet -c constraints.txt -e '.[dev,ray,parquet]'
 # MAVProxy for tests/test_mavproxy.py, without its GUI deps (wxPython, OpenCV, VTK)
 	$(BIN)/pip install --quiet --no-deps MAVProxy==1.8.75
 	touch $@

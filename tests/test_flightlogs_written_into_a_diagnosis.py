@@ -1,6 +1,6 @@
-"""A PX4 ULog and Crazyflie microSD logs that the tests write themselves, from known flights,
-read back and taken end to end through `groundfx gap diagnose` (the sample ULog fixture is a
-vehicle on the ground: nothing in it to diagnose)."""
+"""Logs the tests write themselves from known flights (a PX4 ULog, Crazyflie microSD logs,
+Parquet), read back and taken end to end through `groundfx gap diagnose` (the sample ULog
+fixture is a vehicle on the ground: nothing in it to diagnose)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from learner.flightlogs.flightlog import FlightLog
+from learner.flightlogs.flightlog import FlightLog, write_log
 from learner.flightlogs.readers import read_log
 from tests.helpers import run_groundfx
 from tests.test_flightlogs_autopilot_logs import NANO, assert_round_trip, known_flight, ned_frd
@@ -83,3 +83,11 @@ def test_crazyflie_microsd_logs_go_through_a_diagnosis(tmp_path: Path) -> None:
         logs.append(path)
     gap = diagnose(tmp_path, logs, "--world", "crazyflie_lab", "--vehicle", "crazyflie2")
     assert gap["vehicle"] == "crazyflie2"
+
+
+def test_parquet_logs_go_through_a_diagnosis(tmp_path: Path) -> None:
+    logs = [write_log(known_flight(10.0, phase=k), tmp_path / f"flight{k}.parquet") for k in (0, 1)]
+    back = read_log(logs[0])
+    assert_round_trip(back, known_flight(10.0, phase=0), rotor_rel=1e-9)
+    gap = diagnose(tmp_path, logs, "--world", "default")
+    assert gap["gap"]["force_rms_n"]["before"] < 0.02 * NANO.weight_n

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from simbridge.config import ConfigError
+
 COLUMNS: dict[str, str] = {
     "time_s": "s",
     "x_m": "m, world east",
@@ -88,8 +90,13 @@ def write_log(log: FlightLog, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     cols = log.table()
     if path.suffix == ".parquet":
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+        try:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+        except ImportError:
+            raise ConfigError(
+                f"{path}: writing Parquet needs pyarrow (pip install groundfx[parquet])"
+            ) from None
 
         pq.write_table(pa.table(cols), path)
     else:

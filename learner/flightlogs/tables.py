@@ -199,7 +199,9 @@ def read_table_log(
         try:
             import pyarrow.parquet as pq
         except ImportError:
-            raise ConfigError(f"{path}: reading Parquet needs pyarrow") from None
+            raise ConfigError(
+                f"{path}: reading Parquet needs pyarrow (pip install groundfx[parquet])"
+            ) from None
         table = pq.read_table(path)
         raw = {n: np.asarray(table[n].to_numpy(), dtype=float) for n in table.column_names}
         lists: dict[str, str] = {}
