@@ -63,6 +63,9 @@ class SimLink:
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._sock.settimeout(timeout_s)
         self._timeout_s = timeout_s
+        # the first state may take longer: a simulator starved on a loaded machine (or an
+        # outside one still building its world) is not a lost link
+        self._first_timeout_s = max(timeout_s, connect_timeout_s)
         self._reader = FrameReader(mavlink)
         self._queue: list[tuple[str, dict[str, Any]]] = []
         self._latest: dict[str, dict[str, Any]] = {}
@@ -101,11 +104,11 @@ class SimLink:
             data = self._poll()
             try:
                 if data is None:
-                    self._sock.settimeout(self._timeout_s)
+                    self._sock.settimeout(self._wait_s())
                     data = self._sock.recv(65536)
             except TimeoutError:
                 raise LinkLost(
-                    f"lost the simulator link: no data for {self._timeout_s:g} s"
+                    f"lost the simulator link: no data for {self._wait_s():g} s"
                 ) from None
             except OSError as err:
                 raise LinkLost(
@@ -116,6 +119,9 @@ class SimLink:
             frames = self._reader.feed(data)
             self.received += len(frames)
             self._queue.extend(frames)
+
+    def _wait_s(self) -> float:
+        return self._timeout_s if self.received else self._first_timeout_s
 
     def behind(self) -> bool:
         """Whether another tick is already waiting (received, or in the socket): the autopilot

@@ -88,18 +88,21 @@ class SimServer:
         assert self._listener is not None
         try:
             while True:
-                conn, _ = self._listener.accept()
-                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                self.counters, self._reader = LinkCounters(), FrameReader(mavlink)
-                try:
-                    self._run(conn)
-                except LinkEnded as end:
-                    if not self.options.wait:
-                        return end
-                    if on_end is not None:
-                        on_end(end)
-                finally:
-                    conn.close()
+                # the world is built before the autopilot connects: its first state goes out
+                # at once (building it can take seconds on a loaded machine)
+                with Simulation(self.world, self.vehicle, held=True) as sim:
+                    conn, _ = self._listener.accept()
+                    conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    self.counters, self._reader = LinkCounters(), FrameReader(mavlink)
+                    try:
+                        self._run(conn, sim)
+                    except LinkEnded as end:
+                        if not self.options.wait:
+                            return end
+                        if on_end is not None:
+                            on_end(end)
+                    finally:
+                        conn.close()
         finally:
             self._listener.close()
 
@@ -114,40 +117,37 @@ class SimServer:
 
     # -- the loop -------------------------------------------------------------------------
 
-    def _run(self, conn: socket.socket) -> None:
+    def _run(self, conn: socket.socket, sim: Simulation) -> None:
         world, options = self.world, self.options
-        with Simulation(world, self.vehicle, held=True) as sim:
-            encoder = HilEncoder(world, self.vehicle)
-            command: ActuatorCommand | None = None
-            period = world.control_period_s
-            wall0 = pace0 = time.perf_counter()
-            try:
-                self._send(conn, encoder.encode(sim.state(), sim.time_us))
-                while True:
-                    if command is None:  # before the first actuators: real-time pace, no waiting
-                        if options.lockstep_start:
-                            command = self._receive(conn, options.timeout_s, True)
-                        else:
-                            command = self._receive(conn, period, False)
-                        if command is not None:
-                            sim.release()
-                            pace0 = time.perf_counter() - sim.time_s / (options.speedup or 1.0)
-                    elif command.lockstep:
-                        command = (
-                            self._receive(conn, options.timeout_s, True, sim.time_us) or command
-                        )
+        encoder = HilEncoder(world, self.vehicle)
+        command: ActuatorCommand | None = None
+        period = world.control_period_s
+        wall0 = pace0 = time.perf_counter()
+        try:
+            self._send(conn, encoder.encode(sim.state(), sim.time_us))
+            while True:
+                if command is None:  # before the first actuators: real-time pace, no waiting
+                    if options.lockstep_start:
+                        command = self._receive(conn, options.timeout_s, True)
                     else:
-                        command = self._receive(conn, 0.0, False) or command
-                    sim.step(command.rotor_speeds_rad_s if command else (0.0, 0.0, 0.0, 0.0))
-                    self.counters.steps += 1
-                    self.sim_time_s = sim.time_s
-                    if options.speedup is not None and command is not None:
-                        lag = pace0 + sim.time_s / options.speedup - time.perf_counter()
-                        if lag > 0.0:
-                            time.sleep(lag)
-                    self._send(conn, encoder.encode(sim.state(), sim.time_us, sim.effect_forces()))
-            finally:
-                self.wall_s = time.perf_counter() - wall0
+                        command = self._receive(conn, period, False)
+                    if command is not None:
+                        sim.release()
+                        pace0 = time.perf_counter() - sim.time_s / (options.speedup or 1.0)
+                elif command.lockstep:
+                    command = self._receive(conn, options.timeout_s, True, sim.time_us) or command
+                else:
+                    command = self._receive(conn, 0.0, False) or command
+                sim.step(command.rotor_speeds_rad_s if command else (0.0, 0.0, 0.0, 0.0))
+                self.counters.steps += 1
+                self.sim_time_s = sim.time_s
+                if options.speedup is not None and command is not None:
+                    lag = pace0 + sim.time_s / options.speedup - time.perf_counter()
+                    if lag > 0.0:
+                        time.sleep(lag)
+                self._send(conn, encoder.encode(sim.state(), sim.time_us, sim.effect_forces()))
+        finally:
+            self.wall_s = time.perf_counter() - wall0
 
     def _send(self, conn: socket.socket, data: bytes) -> None:
         try:

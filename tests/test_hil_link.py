@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 import signal
 import socket
 import struct
+import subprocess
 import time
 from itertools import pairwise
 
@@ -206,7 +208,15 @@ def test_a_signal_ends_the_simulator_cleanly_with_one_line(sim_process, sig):
     with socket.create_connection(("127.0.0.1", port)):
         time.sleep(0.2)  # the drone stands on its stand, sensors flowing, no actuators yet
         proc.send_signal(sig)
-        out, err = proc.communicate(timeout=10)
+        try:
+            out, err = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:  # where it hangs, for the failure message
+            proc.send_signal(signal.SIGUSR1)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.communicate(timeout=2)
+            proc.kill()
+            out, err = proc.communicate()
+            pytest.fail(f"the simulator did not end within 30 s of {sig.name}:\n{out}\n{err}")
     assert proc.returncode == 0, err
     lines = [ln for ln in out.splitlines() if ln.startswith("groundfx sim:")]
     assert lines[-1].startswith("groundfx sim: stopped by signal;")

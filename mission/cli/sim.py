@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import signal
 import sys
 from typing import Any
@@ -83,6 +84,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         return 1
     print(f"groundfx sim: listening on tcp:{args.host}:{port}", flush=True)
     signal.signal(signal.SIGTERM, terminate)
+    faulthandler.register(signal.SIGUSR1)  # `kill -USR1 PID`: where each thread is, on stderr
     try:
         end = server.serve(lambda e: print(f"groundfx sim: {server.summary(str(e))}", flush=True))
     except KeyboardInterrupt:
