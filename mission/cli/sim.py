@@ -84,6 +84,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
         return 1
     print(f"groundfx sim: listening on tcp:{args.host}:{port}", flush=True)
     signal.signal(signal.SIGTERM, terminate)
+    # Ctrl-C even where SIGINT came in ignored (a script's background job, nohup): Python then
+    # leaves it ignored, and a simulator told to stop would run on
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     faulthandler.register(signal.SIGUSR1)  # `kill -USR1 PID`: where each thread is, on stderr
     try:
         end = server.serve(lambda e: print(f"groundfx sim: {server.summary(str(e))}", flush=True))
