@@ -89,6 +89,7 @@ class FlightRecorder:
         self._learner: list[tuple[float, float, float]] = []
         self._learner_lock = threading.Lock()  # the online learner reports from its thread
         self._counters: dict[str, tuple[Callable[[], Sequence[int]], ColumnBatch]] = {}
+        self._counters_t = -math.inf  # simulated time of the last counters sample
         self._next_flush_s = -math.inf
         self._flush_deadline = -math.inf
         self._last_t = 0.0
@@ -235,10 +236,14 @@ class FlightRecorder:
                 keep = ~np.isnan(a[:, col])
                 if keep.any():
                     self._scalars(path, a[keep, 0], a[keep, col])
-        now_ns = np.array([round(self._last_t * 1e9)], dtype=np.int64)
-        for link, (read, batch) in self._counters.items():
-            counts = np.asarray([read()], dtype=float)
-            batch.send(self._rec, now_ns, {scalars_key(f"{MAVLINK}/{link}"): counts})
+        # once per simulated instant: a wall-clock flush and the closing one can fall on the
+        # same step (a loaded machine), and the links' counters change only with a step
+        if self._last_t > self._counters_t:
+            self._counters_t = self._last_t
+            now_ns = np.array([round(self._last_t * 1e9)], dtype=np.int64)
+            for link, (read, batch) in self._counters.items():
+                counts = np.asarray([read()], dtype=float)
+                batch.send(self._rec, now_ns, {scalars_key(f"{MAVLINK}/{link}"): counts})
         self._next_flush_s = self._last_t + self._every_s
         self._flush_deadline = time.perf_counter() + FLUSH_WALL_S
 
