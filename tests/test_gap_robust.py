@@ -321,12 +321,12 @@ def test_the_catalogue_is_the_reference_for_nano_and_scales_with_the_vehicle() -
 
 @pytest.mark.parametrize(
     "effect, nano_value",
-    [("body_drag", np.array([3.0])), ("rotor_drag", np.array([8.8e-5, 8.8e-5, 4e-5]))],
+    [("body_drag", np.array([2.0])), ("rotor_drag", np.array([8.8e-5, 8.8e-5, 4e-5]))],
 )
 def test_the_same_relative_effect_on_a_ten_times_heavier_vehicle_gives_the_same_answer(
     tmp_path: Path, effect: str, nano_value: np.ndarray
 ) -> None:
-    """Body drag C_d 3 (the same C_d on ten times the area) and rotor drag 4 catalogue
+    """Body drag C_d 2 (the same C_d on ten times the area) and rotor drag 4 catalogue
     magnitudes (ten times the coefficient at the same rotor speeds): the same status and
     relative parameters. With the nano's absolute bounds the heavy vehicle's C_d 30 sat on
     the bound 5 and was reported absent."""
@@ -350,19 +350,22 @@ def test_the_same_relative_effect_on_a_ten_times_heavier_vehicle_gives_the_same_
     assert big_rel == pytest.approx(nano_rel, rel=0.05)
 
 
-def test_an_effect_beyond_the_catalogues_range_is_reported_at_its_bound(tmp_path: Path) -> None:
-    """A ground effect of rho 40 (38% more thrust at three rotor radii) against the bound 25:
-    'at bound' with the sentence, in the printed summary, report.md and gap.json."""
+def test_an_effect_beyond_the_physical_range_is_reported_implausible(tmp_path: Path) -> None:
+    """A ground effect of rho 40 (38% more thrust at three rotor radii) against the physical
+    range's 25: 'implausible' with the value and what it would mean, in the printed summary,
+    report.md and gap.json, and not written into the corrected world."""
     world = world_file(tmp_path / "world.yaml")
     logs = write_flights(tmp_path / "logs", NANO, world, {"ground_effect": np.array([40.0])})
     out = tmp_path / "out"
     done = cli(*map(str, logs), "--world", str(world), "--folds", "3", "--no-replay",
                "--out", str(out))  # fmt: skip
     assert done.returncode == 0, done.stderr
-    sentence = "rho reached its bound 25: the effect is stronger than the catalogue's range"
     figures = json.loads((out / "gap.json").read_text())
     ge = figures["effects"]["ground_effect"]
-    assert ge["status"] == "at bound"
+    assert ge["status"] == "implausible"
+    assert ge["parameters"]["rho"]["value"] == pytest.approx(40.0, rel=0.1)
+    sentence = "outside its physical range [0.01, 25]: it would mean more thrust near the ground"
     assert sentence in ge["why"]
     assert sentence in (out / "report.md").read_text()
-    assert "ground_effect        at bound (rho reached its bound 25" in done.stdout
+    assert "ground_effect        implausible (rho " in done.stdout
+    assert "ground_effect" not in (out / "corrected_world.yaml").read_text()

@@ -42,6 +42,10 @@ class Candidate:
     hi: tuple[float, ...]
     typical: tuple[float, ...]  # a magnitude worth finding: the excitation test's probe
     effects: tuple[str, ...]  # catalogue effects it stands for
+    # what a real vehicle shows (`PHYSICAL`); a fit outside it is reported as implausible
+    plausible_lo: tuple[float, ...] = ()
+    plausible_hi: tuple[float, ...] = ()
+    needs_accelerometer: bool = False  # models the accelerometer: no candidate without one
 
 
 # The reference vehicle the catalogue's magnitudes were chosen for: the thesis's nano
@@ -71,8 +75,8 @@ REFERENCE: tuple[Candidate, ...] = (
     ),
     Candidate("body_drag", ("drag_coefficient",), ("1",), (0.0,), (5.0,), (1.0,), ("body_drag",)),
     Candidate(
-        "wind", ("wx", "wy", "wz"), ("m/s",) * 3, (-WIND_MAX_M_S,) * 3, (WIND_MAX_M_S,) * 3,
-        (0.5,) * 3, ("wind",),
+        "wind", ("wx", "wy"), ("m/s",) * 2, (-WIND_MAX_M_S,) * 2, (WIND_MAX_M_S,) * 2,
+        (0.5,) * 2, ("wind",),
     ),
     Candidate("motor_lag", ("tau",), ("s",), (0.002,), (0.3,), (0.02,), ("motor_lag",)),
     Candidate(
@@ -87,6 +91,98 @@ REFERENCE: tuple[Candidate, ...] = (
         "sensor_latency", ("imu_delay",), ("s",), (0.0,), (0.1,), (0.008,), ("sensor_latency",)
     ),
 )  # fmt: skip
+# What real vehicles show, for the reference vehicle (scaled as the bounds are), with what a
+# value beyond it would mean. The fit's bounds are wider, so that a fit outside this range is
+# seen and reported as implausible instead of silently held at a bound.
+PHYSICAL: dict[str, tuple[tuple[float, ...], tuple[float, ...], str]] = {
+    # real multirotors show 6-17% more thrust at 2-3 rotor radii (rho up to 21); a single
+    # rotor's Cheeseman-Bennett law is rho 1
+    "ground_effect": (
+        (0.01,),
+        (RHO_MAX,),
+        "more thrust near the ground than any measured "
+        "multirotor shows (17% at three rotor radii is rho 21)",
+    ),
+    "ceiling_effect": (
+        (0.01,),
+        (RHO_MAX,),
+        "more thrust under a ceiling than measured rotors show",
+    ),
+    "wall_effect": (
+        (-3.0,),
+        (3.0,),
+        "a sideways force near a wall of more than 3 times the catalogue's model",
+    ),
+    # 10% of the weight per m/s at hover: ten times a quadrotor's measured rotor drag
+    "rotor_drag": (
+        (0.0,) * 3,
+        (1.8e-4,) * 3,
+        "a drag of more than 10% of the weight per m/s of air speed",
+    ),
+    "body_drag": ((0.0,), (2.5,), "a drag coefficient above a flat plate's (about 2)"),
+    # horizontal only: a mean vertical wind over a flight is not a site's air (a thermal, a
+    # slope) and, through the rotor drag along z, it is a thrust scale by another name
+    "wind": ((-WIND_MAX_M_S,) * 2, (WIND_MAX_M_S,) * 2, "air the vehicle could not fly in"),
+    # brushed nano motors 20-60 ms (the neural-swarm authors model 57 ms), 12-inch props up
+    # to about 0.1 s
+    "motor_lag": ((0.002,), (0.15,), "motors slower than any multirotor's (0.15 s to 63%)"),
+    "thrust_mass": (
+        (-0.3,),
+        (0.3,),
+        "a thrust or mass 30% off: the wrong vehicle, or thrust "
+        "in the wrong units, rather than an effect",
+    ),
+    # a calibrated MEMS IMU: offsets of 20-70 mg (BMI088 20 mg, MPU-6050 60 mg) before the
+    # estimator removes them; 0.1 g is beyond a working accelerometer's
+    "sensor_bias": (
+        (-1.0,) * 3,
+        (1.0,) * 3,
+        "an accelerometer offset beyond 0.1 g: a "
+        "miscalibrated or misaligned IMU, or a force in the world (wind) read as "
+        "a bias",
+    ),
+    # sensor filters and logging add a few ms; 30 ms is a slow estimator's output
+    "sensor_latency": (
+        (0.0,),
+        (0.03,),
+        "an accelerometer more than 30 ms late: a log whose "
+        "streams are misaligned in time, or a lag of the motors read as a "
+        "sensor delay",
+    ),
+}
+# the fit's search range where it is wider than the catalogue's bounds above: an implausible
+# value must be found to be reported
+FIT_RANGE: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {
+    "ground_effect": ((0.01,), (50.0,)),
+    "ceiling_effect": ((0.01,), (50.0,)),
+}
+REFERENCE = tuple(
+    replace(
+        c,
+        lo=FIT_RANGE.get(c.name, (c.lo, c.hi))[0],
+        hi=FIT_RANGE.get(c.name, (c.lo, c.hi))[1],
+        plausible_lo=PHYSICAL[c.name][0],
+        plausible_hi=PHYSICAL[c.name][1],
+        needs_accelerometer=c.name in ("sensor_bias", "sensor_latency"),
+    )
+    for c in REFERENCE
+)
+
+
+def implausible_parameters(name: str, value: np.ndarray, cat: dict[str, Candidate]) -> list[dict]:
+    """The parameters outside the physical range, with what such a value would mean."""
+    c = cat[name]
+    out = []
+    for i, p in enumerate(c.params):
+        v = float(value[i])
+        if not c.plausible_lo[i] <= v <= c.plausible_hi[i]:
+            out.append(
+                {"parameter": p, "value": v, "range": [c.plausible_lo[i], c.plausible_hi[i]],
+                 "meaning": PHYSICAL[name][2]}
+            )  # fmt: skip
+    return out
+
+
 # Names, parameters, units and groups (the same for every vehicle); bounds and magnitudes of
 # the reference vehicle: use `catalogue(vehicle)` for those.
 CANDIDATES: dict[str, Candidate] = {c.name: c for c in REFERENCE}
@@ -137,12 +233,16 @@ def catalogue(vehicle: Vehicle) -> dict[str, Candidate]:
                 lo=tuple(x * f for x in c.lo),
                 hi=tuple(x * f for x in c.hi),
                 typical=tuple(x * f for x in c.typical),
+                plausible_lo=tuple(x * f for x in c.plausible_lo),
+                plausible_hi=tuple(x * f for x in c.plausible_hi),
             )
         if c.name == "wind":
             c = replace(
                 c,
                 lo=tuple(max(x, -SIM_WIND_MAX_M_S) for x in c.lo),
                 hi=tuple(min(x, SIM_WIND_MAX_M_S) for x in c.hi),
+                plausible_lo=tuple(max(x, -SIM_WIND_MAX_M_S) for x in c.plausible_lo),
+                plausible_hi=tuple(min(x, SIM_WIND_MAX_M_S) for x in c.plausible_hi),
             )
         out[c.name] = c
     return out
@@ -166,7 +266,7 @@ def nominal_values(effects: EffectSet, vehicle: Vehicle | None = None) -> Values
             cd *= sum(effects.body_drag.area_m2) / sum(body_areas_m2(vehicle.body_size_m))
         out["body_drag"] = np.array([cd])
     if effects.wind:
-        out["wind"] = np.array(effects.wind.mean_m_s)
+        out["wind"] = np.array(effects.wind.mean_m_s[:2])  # the candidate is horizontal
     if effects.motor_lag:
         out["motor_lag"] = np.array([effects.motor_lag.time_constant_s])
     s = effects.thrust_coefficient.scale if effects.thrust_coefficient else 1.0
@@ -230,7 +330,7 @@ def world_force(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
 def _drag(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
     if "rotor_drag" not in values and "body_drag" not in values:
         return np.zeros((len(d.time_s), 3))
-    wind = values.get("wind", np.zeros(3))
+    wind = np.append(values.get("wind", np.zeros(2))[:2], 0.0)
     v_air = np.einsum("nji,nj->ni", d.rotation, d.velocity_m_s - wind)  # body frame
     comps = (v_air[:, 0], v_air[:, 1], v_air[:, 2])
     body = np.zeros_like(v_air)
@@ -265,7 +365,7 @@ def to_world_effects(values: Values, vehicle: Vehicle | None = None) -> list[dic
                 entry["area_m2"] = list(body_areas_m2(vehicle.body_size_m))
             out.append(entry)
         elif name == "wind":
-            out.append({"name": name, "mean_m_s": x})
+            out.append({"name": name, "mean_m_s": [*x[:2], 0.0]})
         elif name == "motor_lag":
             out.append({"name": name, "time_constant_s": x[0]})
         elif name == "thrust_mass":

@@ -17,8 +17,11 @@ from learner.gap.plausibility import check as check_plausible
 from learner.gap.regimes import REGIMES, RegimeBin, regime_table, regime_variables, rules
 from learner.gap.residual import force_gap_ms, residual_n
 from learner.gap.rollout import HORIZON_S, rms, rollout_errors, shrink
+from learner.gap.search import forward_search
 from learner.gap.stats import ess_ratio
 from learner.gap.torque import torque_gap
+from learner.gap.unexplained import held_out_learned, learn_unexplained
+from simbridge.effects.learned import ResidualModel
 from simbridge.vehicle import Vehicle
 from simbridge.world import World
 
@@ -44,6 +47,8 @@ class Diagnosis:
     residuals: dict[str, np.ndarray] = field(default_factory=dict)  # flight -> (N, 3)
     corrected_residuals: dict[str, np.ndarray] = field(default_factory=dict)
     flights: dict[str, FlightData] = field(default_factory=dict)
+    unexplained: dict[str, Any] = field(default_factory=dict)  # what the catalogue leaves
+    learned_model: ResidualModel | None = None  # that, learnt (a `learned_residual` effect)
 
 
 def _problem(flights: list[FlightData], nominal: Values, vehicle: Vehicle) -> gapfit.Problem:
@@ -59,12 +64,14 @@ def effect_report(
     excitation: dict[str, float],
     excited: list[str],
     trail: list[dict] | None = None,
+    tried: list[str] | None = None,
 ) -> dict[str, dict[str, Any]]:
-    """Each catalogue effect: present, absent, at its bound (its fit ended on a bound of the
-    catalogue's range: stronger than the range, or compensating another; never "absent") or
-    not identifiable (not excited, or indistinguishable from another: the group is named),
-    with parameters and 95% CIs."""
-    bounded = _bounded(trail or [])
+    """Each catalogue effect: present; implausible (the data want it, at a value outside its
+    physical range: the value and what it would mean), at bound (its fit ended on a bound of
+    the search), not identifiable (not excited, not a candidate for these logs, cancelling or
+    indistinguishable from another: the group is named); else absent. With 95% CIs."""
+    tried = list(CANDIDATES) if tried is None else tried
+    refused = _refused(trail or [])
     sens = {c: gapfit.sensitivities(problem, c, {**best.values}) for c in excited}
     out: dict[str, dict[str, Any]] = {}
     for name, cand in CANDIDATES.items():
@@ -74,6 +81,8 @@ def effect_report(
                 other
                 for other in excited
                 if other != name
+                and other in sens
+                and name in sens
                 and max(
                     gapfit.collinearity_r2(sens[name], sens[other]),
                     gapfit.collinearity_r2(sens[other], sens[name]),
@@ -98,19 +107,19 @@ def effect_report(
                 entry["why"] = "indistinguishable in the data: " + ", ".join(members)
             else:
                 entry["status"] = "present"
+        elif name not in tried:
+            entry["status"] = "not identifiable"
+            entry["why"] = (
+                "not a candidate for these logs: it models the accelerometer, and the logs' "
+                "acceleration is differentiated from their velocity"
+            )
+            entry["group"] = list(cand.effects)
+        elif name in refused:
+            entry.update(_refusal(name, refused[name], problem))
         elif name not in excited:
             entry["status"] = "not identifiable"
             entry["why"] = f"not excited by the flights (z = {excitation[name]:.1f})"
             entry["group"] = list(cand.effects)
-        elif name in bounded:
-            step = bounded[name]
-            entry["status"] = "at bound"
-            entry["at_bound"] = step["at_bound"]
-            entry["why"] = bound_sentence(step["at_bound"])
-            entry["parameters"] = {
-                p: {"value": v, "ci95": None, "unit": cand.units[i]}
-                for i, (p, v) in enumerate(zip(cand.params, step["value"], strict=True))
-            }
         else:
             entry["status"] = "absent"
         for effect in cand.effects:
@@ -119,16 +128,82 @@ def effect_report(
                 c = entry["parameters"]["c"]
                 e["parameters"] = _thrust_mass_as(effect, c)
             out[effect] = e
+    # an effect indistinguishable from a fitted one is not absent: it shares that one's group
+    for name in best.values:
+        for effect in CANDIDATES[name].effects:
+            entry = out[effect]
+            for other in entry.get("group", []):
+                o = out[other]
+                if o["status"] == "absent" or o.get("why", "").startswith("cancels"):
+                    out[other] = {
+                        **{k: v for k, v in o.items() if k != "parameters"},
+                        "status": "not identifiable",
+                        "group": entry["group"],
+                        "why": f"indistinguishable from {name}, which carries the fitted "
+                        "value: " + ", ".join(entry["group"]),
+                    }
     return out
 
 
-def _bounded(trail: list[dict]) -> dict[str, dict]:
-    """Candidates whose last fit in the forward search ended on a bound: their trail step."""
+def _refused(trail: list[dict]) -> dict[str, dict]:
+    """Candidates the data asked for (criterion down, significant) in a move refused as
+    unphysical, and not chosen later: the last such step of each."""
     last: dict[str, dict] = {}
     for step in trail:
-        if "added" in step:
-            last[step["added"]] = step
-    return {name: step for name, step in last.items() if step.get("at_bound")}
+        if "added" not in step or step.get("selected") or not step.get("significant"):
+            continue
+        if step["implausible"] or step["at_bound"] or step["cancelling"]:
+            for name in [*step.get("with", []), step["added"]]:
+                last[name] = step
+    return last
+
+
+def _refusal(name: str, step: dict, problem: gapfit.Problem) -> dict[str, Any]:
+    """The report entry of a candidate refused as unphysical (`_refused`)."""
+    cand = CANDIDATES[name]
+    value = step["values"].get(name, step["value"])
+    params = {
+        p: {"value": v, "ci95": None, "unit": cand.units[i]}
+        for i, (p, v) in enumerate(zip(cand.params, value, strict=True))
+    }
+    pairs = [c for c in step["cancelling"] if name in c["members"]]
+    if pairs:
+        members = sorted({e for c in pairs for m in c["members"] for e in CANDIDATES[m].effects})
+        others = sorted({m for c in pairs for m in c["members"]} - {name})
+        return {
+            "status": "not identifiable",
+            "group": members,
+            "parameters": params,
+            "why": (
+                f"cancels {', '.join(others)}: their contributions oppose each other (cosine "
+                f"{pairs[0]['cosine']:.2f}, parameter correlation {pairs[0]['correlation']:.2f})"
+                ", so the data fix only their sum; not written into the corrected world"
+            ),
+        }
+    own = step["implausible"].get(name) or []
+    if own:
+        parts = [
+            f"{h['parameter']} {h['value']:.4g} outside its physical range "
+            f"[{h['range'][0]:.4g}, {h['range'][1]:.4g}]"
+            for h in own
+        ]
+        return {
+            "status": "implausible",
+            "implausible": own,
+            "parameters": params,
+            "why": "; ".join(parts) + f": it would mean {own[0]['meaning']}; not written "
+            "into the corrected world",
+        }
+    hits = step.get("at_bound_members", {}).get(name) or []
+    if hits:
+        return {"status": "at bound", "at_bound": hits, "parameters": params,
+                "why": bound_sentence(hits)}  # fmt: skip
+    # refused for another member's sake: what the data asked for is in that member's entry
+    blame = sorted(set(step["implausible"]) | set(step.get("at_bound_members", {})))
+    return {
+        "status": "absent",
+        "why": f"asked for only beside {', '.join(blame)}, which was refused as unphysical",
+    }
 
 
 def bound_sentence(hits: list[dict]) -> str:
@@ -203,23 +278,44 @@ def diagnose(
     check_plausible([d.name for d in fit_data + hold_data], problem.residuals + hold_res, vehicle)
     excitation = {c: gapfit.excitation_z(problem, c) for c in CANDIDATES}
     excited = [c for c in CANDIDATES if excitation[c] >= gapfit.Z_EXCITE]
+    # every candidate is tried (the excitation test only tells "absent" from "not excited");
+    # those modelling the accelerometer only where every fitting log carries one
+    measured = all(d.measured_acceleration for d in fit_data)
+    tried = [c for c in CANDIDATES if measured or not CANDIDATES[c].needs_accelerometer]
     # the effective sample size of the residual once the excited effects are all fitted
     # (only an approximate fit: all excited candidates at once are ill-conditioned, and a
     # few rows more or less sent the bounded trust region from 11 to 532 evaluations)
-    everything = gapfit.fit(problem, tuple(c for c in excited if c != "wind"), max_nfev=100)
+    everything = gapfit.fit(
+        problem, tuple(c for c in excited if c != "wind" and c in tried), max_nfev=100
+    )
     after = problem.predicted(everything.values)
     problem.ess_ratio = ess_ratio(
         [(r - p)[:: gapfit.STRIDE] for r, p in zip(problem.residuals, after, strict=True)]
     )
-    best, trail = gapfit.forward_search(problem, excited, folds)
-    effects = effect_report(problem, best, excitation, excited, trail)
+    best, trail = forward_search(problem, tried, folds)
+    effects = effect_report(problem, best, excitation, excited, trail, tried)
     all_data = fit_data + hold_data
     all_res = problem.residuals + hold_res
     table = regime_table(all_data, all_res, vehicle)
-    if hold_data:
-        gap = held_out_gap(_problem(hold_data, nominal, vehicle), best.values)
+    hold_problem = _problem(hold_data, nominal, vehicle) if hold_data else None
+    if hold_problem is not None:
+        gap = held_out_gap(hold_problem, best.values)
     else:
         gap = cross_validated_gap(problem, best.names, folds)
+    left = learn_unexplained(problem, best.values)
+    corrected = [
+        r - p
+        for r, p in zip(
+            all_res, _problem(all_data, nominal, vehicle).predicted(best.values), strict=True
+        )
+    ]
+    unexplained = dict(left.summary)
+    left_table = regime_table(all_data, corrected, vehicle)
+    unexplained["where"] = where(left_table)
+    unexplained["rules"] = rules(left_table)
+    if hold_problem is not None:
+        gap["force_rms_n_learned"] = held_out_learned(hold_problem, best.values, left.model)
+    mark_confidence(effects, unexplained)
 
     return Diagnosis(
         fitting=[d.name for d in fit_data],
@@ -237,17 +333,35 @@ def diagnose(
         left_out=left_out_counts(all_data),
         notes=fallback_notes(fit_data, hold_data, folds),
         residuals={d.name: r for d, r in zip(all_data, all_res, strict=True)},
-        corrected_residuals={
-            d.name: r - p
-            for d, r, p in zip(
-                all_data,
-                all_res,
-                _problem(all_data, nominal, vehicle).predicted(best.values),
-                strict=True,
-            )
-        },
+        corrected_residuals={d.name: c for d, c in zip(all_data, corrected, strict=True)},
         flights={d.name: d for d in all_data},
+        unexplained=unexplained,
+        learned_model=left.model,
     )
+
+
+def where(table: list[RegimeBin], limit: int = 8) -> list[dict[str, Any]]:
+    """The significant regime bins of a residual, largest first, as plain records."""
+    sig = sorted((b for b in table if b.significant), key=lambda b: -abs(b.mean))
+    return [
+        {"variable": b.variable, "low": b.low, "high": b.high, "component": b.component,
+         "mean_share": b.mean, "ci95": [b.ci_low, b.ci_high], "rows": b.rows}
+        for b in sig[:limit]
+    ]  # fmt: skip
+
+
+def mark_confidence(effects: dict[str, dict[str, Any]], unexplained: dict[str, Any]) -> None:
+    """An effect is named with confidence only when nothing systematic is left beside it:
+    otherwise it may stand in for an effect outside the catalogue."""
+    for e in effects.values():
+        if e["status"] != "present":
+            continue
+        e["confident"] = not unexplained["significant"]
+        if unexplained["significant"]:
+            e["confidence_note"] = (
+                f"the catalogue leaves {unexplained['share'] * 100:.0f}% of the gap, "
+                "systematic: this effect may stand in for one outside the catalogue"
+            )
 
 
 def held_out_gap(problem: gapfit.Problem, values: Values) -> dict[str, Any]:

@@ -13,6 +13,7 @@ import yaml
 from learner.gap.candidates import to_world_effects
 from learner.gap.diagnose import Diagnosis
 from learner.gap.regimes import describe_range
+from learner.gap.report_unexplained import markdown_section, write_learned
 
 
 def corrected_world_yaml(nominal_yaml: str, diagnosis: Diagnosis) -> str:
@@ -42,6 +43,7 @@ def figures(diagnosis: Diagnosis, closed_loop: dict[str, Any] | None) -> dict[st
         "regimes": [dict(b.__dict__, significant=b.significant) for b in diagnosis.regimes],
         "rules": diagnosis.rules,
         "gap": diagnosis.gap,
+        "unexplained": diagnosis.unexplained,
         "closed_loop": closed_loop,
     }
 
@@ -75,7 +77,7 @@ def all_notes(diagnosis: Diagnosis, closed_loop: dict[str, Any] | None) -> list[
     if sentence and closed_loop and (closed_loop["status"] != "flown" or closed_loop["failed"]):
         notes.append(sentence)
     for effect, e in diagnosis.effects.items():
-        if e["status"] == "at bound":
+        if e["status"] in ("at bound", "implausible"):
             notes.append(f"{effect}: {e['why']}")
     return notes
 
@@ -93,7 +95,9 @@ def write_outputs(
         "json": out / "gap.json",
         "report": out / "report.md",
     }
-    paths["world"].write_text(corrected_world_yaml(nominal_world.read_text(), diagnosis))
+    corrected = corrected_world_yaml(nominal_world.read_text(), diagnosis)
+    paths["world"].write_text(corrected)
+    paths.update(write_learned(diagnosis, corrected, out))
     data = figures(diagnosis, closed_loop)
     paths["json"].write_text(json.dumps(data, indent=1, default=_plain))
     paths.update(_plots(diagnosis, out))
@@ -271,6 +275,7 @@ def _markdown(
                 f"{r['before_n'] * 1000:.2f} | {r['after_n'] * 1000:.2f} | "
                 f"{r['shrink'] * 100:.0f}% |"
             )
+    lines += markdown_section(diagnosis)
     lines += ["", "![residuals](residuals.png)", "", "Outputs: " + ", ".join(
         f"`{p.name}`" for p in paths.values())]  # fmt: skip
     return "\n".join(lines) + "\n"

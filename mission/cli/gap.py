@@ -68,7 +68,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         not args.no_replay,
     )  # fmt: skip
     for effect, e in result["effects"].items():
-        why = f" ({e['why']})" if e["status"] == "at bound" else ""
+        why = f" ({e['why']})" if e["status"] in ("at bound", "implausible") else ""
         print(f"{effect:20s} {e['status']}{why}")
     for note in result.get("notes") or []:
         print(f"note: {note}")
