@@ -11,7 +11,7 @@ import numpy as np
 
 from learner.flightlogs.flightlog import FlightLog
 from learner.gap import fit as gapfit
-from learner.gap.candidates import CANDIDATES, Values, nominal_values
+from learner.gap.candidates import CANDIDATES, Values, implausible_parameters, nominal_values
 from learner.gap.flightdata import FlightData, describe_left_out, prepare
 from learner.gap.plausibility import check as check_plausible
 from learner.gap.regimes import REGIMES, RegimeBin, regime_table, regime_variables, rules
@@ -72,7 +72,7 @@ def effect_report(
     indistinguishable from another: the group is named); else absent. With 95% CIs."""
     tried = list(CANDIDATES) if tried is None else tried
     refused = _refused(trail or [])
-    sens = {c: gapfit.sensitivities(problem, c, {**best.values}) for c in excited}
+    sens = {c: gapfit.sensitivities(problem, c, {**best.values}) for c in excited if c in tried}
     out: dict[str, dict[str, Any]] = {}
     for name, cand in CANDIDATES.items():
         entry: dict[str, Any] = {"candidate": name, "excitation_z": excitation[name]}
@@ -89,6 +89,10 @@ def effect_report(
                 )
                 >= gapfit.COLLINEAR_R2
             )
+            ruled_out = _alternatives_ruled_out(problem, best, name, group)
+            if ruled_out:
+                entry["alternatives_ruled_out"] = ruled_out
+                group = [g for g in group if g not in ruled_out]
             v, se = best.values[name], best.stderr[name]
             entry["parameters"] = {
                 p: {
@@ -142,6 +146,31 @@ def effect_report(
                         "why": f"indistinguishable from {name}, which carries the fitted "
                         "value: " + ", ".join(entry["group"]),
                     }
+    return out
+
+
+def _alternatives_ruled_out(
+    problem: gapfit.Problem, best: gapfit.Fit, name: str, group: list[str]
+) -> dict[str, str]:
+    """Of the candidates the data cannot tell from `name`, those that could carry its share
+    only at a value outside their physical range or on a bound (a 3.6 m/s wind read as an
+    accelerometer bias of 1.3 m/s^2): physics tells them apart. Candidate -> why."""
+    out = {}
+    cat = problem.catalogue
+    for other in group:
+        if other in best.values:
+            continue
+        names = tuple(other if n == name else n for n in best.names)
+        alt = gapfit.fit(problem, names, max_nfev=60, start=best.values)
+        bad = implausible_parameters(other, alt.values[other], cat)
+        if bad:
+            h = bad[0]
+            out[other] = (
+                f"it would take {h['parameter']} {h['value']:.3g}, outside its physical range "
+                f"[{h['range'][0]:.3g}, {h['range'][1]:.3g}]"
+            )
+        elif gapfit.at_bound(other, alt.values[other], cat):
+            out[other] = "it would sit on a bound of the search"
     return out
 
 
@@ -316,6 +345,7 @@ def diagnose(
     if hold_problem is not None:
         gap["force_rms_n_learned"] = held_out_learned(hold_problem, best.values, left.model)
     mark_confidence(effects, unexplained)
+    per_flight_values(effects, all_data, nominal, vehicle, best)
 
     return Diagnosis(
         fitting=[d.name for d in fit_data],
@@ -338,6 +368,36 @@ def diagnose(
         unexplained=unexplained,
         learned_model=left.model,
     )
+
+
+def per_flight_values(
+    effects: dict[str, dict[str, Any]],
+    flights: list[FlightData],
+    nominal: Values,
+    vehicle: Vehicle,
+    best: gapfit.Fit,
+) -> None:
+    """The chosen set refitted on each flight alone (fitting and held out): whether a present
+    effect is the same on every flight (a wind's speed and direction within one condition).
+    A wind's direction is the one it blows towards, counterclockwise from world x (east)."""
+    if not best.names:
+        return
+    fits = [(d.name, gapfit.fit(_problem([d], nominal, vehicle), best.names,
+                                max_nfev=60, start=best.values)) for d in flights]  # fmt: skip
+    for name in best.names:
+        for effect in CANDIDATES[name].effects:
+            e = effects[effect]
+            if e["status"] != "present":
+                continue
+            rows = []
+            for flight, f in fits:
+                v = f.values[name]
+                row: dict[str, Any] = {"flight": flight, "values": [float(x) for x in v]}
+                if name == "wind":
+                    row["speed_m_s"] = float(np.hypot(v[0], v[1]))
+                    row["towards_deg"] = float(np.degrees(np.arctan2(v[1], v[0])) % 360.0)
+                rows.append(row)
+            e["per_flight"] = rows
 
 
 def where(table: list[RegimeBin], limit: int = 8) -> list[dict[str, Any]]:
