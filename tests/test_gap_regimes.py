@@ -64,7 +64,8 @@ def synthetic_flight(
     xb /= np.linalg.norm(xb, axis=1, keepdims=True)
     rot = np.stack([xb, np.cross(zb, xb), zb], axis=2)
     # rates are noise about zero: no moment on average, so the real rotor forces are equal
-    real = np.repeat(thrust[:, None] / 4.0, 4, axis=1)
+    # but for a little white jitter (logs command each rotor on its own)
+    real = thrust[:, None] / 4.0 * (1.0 + rng.normal(0.0, 0.005, (len(t), 4)))
     commands = np.sqrt(real / (vehicle.thrust_coefficient_n_s2 * np.asarray(rotor_scale)))
     white = rng.normal(0.0, NOISE_SHARE * w, (len(t), 3))
     slow = lfilter(
@@ -161,3 +162,29 @@ def test_all_rotors_alike_is_named_as_a_pattern_not_a_rotor(vehicle: Vehicle) ->
     s = rotor_attribution(fl, {}, vehicle, res)
     assert s["patterns"]["collective"]["share"] == pytest.approx(-0.1, abs=0.015)
     assert "follow one pattern, all four rotors alike" in s["rule"]
+
+
+def test_summaries_are_json_and_render_their_rules(vehicle: Vehicle) -> None:
+    import json
+
+    from learner.gap.summaries import extra_rules, markdown_section, summaries
+
+    fl, res = flights(vehicle, 2, 30.0, 5, rotor_scale=(1.0, 0.85, 1.0, 1.0))
+    s = json.loads(json.dumps(summaries(fl, res, {}, vehicle)))
+    found = extra_rules(s)
+    assert len(found) == 1 and found[0].startswith("rotor 1 (back-left)")
+    text = "\n".join(markdown_section(s, with_rules=True))
+    assert found[0] in text and "| 1 (back-left) | -15." in text
+
+
+def test_logs_with_one_collective_command_name_no_rotor(vehicle: Vehicle) -> None:
+    import dataclasses
+
+    fl, res = flights(vehicle, 2, 30.0, 6, rotor_scale=(0.9, 0.9, 0.9, 0.9))
+    same = [
+        dataclasses.replace(d, commands_rad_s=np.repeat(d.commands_rad_s.mean(1)[:, None], 4, 1))
+        for d in fl
+    ]
+    s = rotor_attribution(same, {}, vehicle, res)
+    assert not s["per_rotor_logged"] and not any(r["significant"] for r in s["rotors"])
+    assert s["rule"].startswith("all four rotors alike: -10") and "no single rotor" in s["rule"]

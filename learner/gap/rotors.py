@@ -115,7 +115,7 @@ def axis_summary(
         floor = max(K_SE * se_of(draws), K_SE * float(noise_se(sd[j], rows, ess)))
         lo, hi = ci95(draws)
         out.append({
-            "axis": axis, "mean_n_m": mean, "ci95_n_m": [lo, hi], "share": mean / ref[j],
+            "axis": axis, "mean_n_m": mean, "ci95_n_m": [lo, hi], "share": float(mean / ref[j]),
             "p": p, "significant": bool(p < ALPHA and abs(mean) >= floor and not lo <= 0 <= hi),
         })  # fmt: skip
     return out
@@ -175,9 +175,41 @@ def rotor_attribution(
         "rotors": rotors,
         "patterns": patterns,
         "axes": axis_summary(flights, [q[2] for q in parts], vehicle, rng),
+        "per_rotor_logged": per_rotor_logged(flights),
     }
-    out["rule"] = rotor_rule(rotors, patterns)
+    if not out["per_rotor_logged"]:
+        # one collective command: the moments the rotors gave are not in the log, so the
+        # torque residual is the whole I w' and only the collective pattern means anything
+        out["why"] = NO_PER_ROTOR
+        for r in rotors:
+            r["significant"] = False
+        for name in PATTERN_NAMES[1:]:
+            patterns[name]["significant"] = False
+        c = patterns["collective"]
+        lo, hi = c["ci95"]
+        out["rule"] = (
+            f"all four rotors alike: {c['share'] * 100:+.1f}% thrust against the model (95% CI "
+            f"{lo * 100:+.1f} to {hi * 100:+.1f}%; {PATTERN_WORDS['collective']}); {NO_PER_ROTOR}"
+            if c["significant"] and abs(c["share"]) >= MIN_ROTOR_ERROR
+            else None
+        )
+    else:
+        out["rule"] = rotor_rule(rotors, patterns)
     return out
+
+
+NO_PER_ROTOR = "the logs carry one collective rotor command, so no single rotor can be told"
+
+
+def per_rotor_logged(flights: list[FlightData]) -> bool:
+    """Whether any log's rotor commands differ between rotors (Neural-Fly's carry only the
+    collective thrust, spread evenly)."""
+    for d in flights:
+        n = d.commands_rad_s
+        spread = np.max(np.abs(n - n.mean(axis=1, keepdims=True)))
+        if spread > 1e-6 * max(float(np.max(np.abs(n))), 1e-12):
+            return True
+    return False
 
 
 def _pct(x: float) -> str:
