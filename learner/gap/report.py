@@ -13,6 +13,7 @@ import yaml
 from learner.gap.candidates import to_world_effects
 from learner.gap.diagnose import Diagnosis
 from learner.gap.regimes import describe_range
+from learner.gap.summaries import markdown_section  # issue 16: whole-flight summaries
 
 
 def corrected_world_yaml(nominal_yaml: str, diagnosis: Diagnosis) -> str:
@@ -43,6 +44,7 @@ def figures(diagnosis: Diagnosis, closed_loop: dict[str, Any] | None) -> dict[st
         "rules": diagnosis.rules,
         "gap": diagnosis.gap,
         "closed_loop": closed_loop,
+        "summaries": getattr(diagnosis, "summaries", None),  # issue 16
     }
 
 
@@ -216,6 +218,7 @@ def _markdown(
     lines += [f"- {r}" for r in diagnosis.rules] or ["- no regime with a significant residual"]
     if "plot_regimes" in paths:
         lines += ["", "![regimes](regimes.png)"]
+    lines += markdown_section(getattr(diagnosis, "summaries", None))  # issue 16
     lines += [
         "",
         "## Which",
