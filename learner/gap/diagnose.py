@@ -19,6 +19,7 @@ from learner.gap.residual import force_gap_ms, residual_n
 from learner.gap.rollout import HORIZON_S, rms, rollout_errors, shrink
 from learner.gap.search import forward_search
 from learner.gap.stats import ess_ratio
+from learner.gap.summaries import extra_rules, summaries
 from learner.gap.torque import torque_gap
 from learner.gap.unexplained import held_out_learned, learn_unexplained
 from simbridge.effects.learned import ResidualModel
@@ -47,6 +48,7 @@ class Diagnosis:
     residuals: dict[str, np.ndarray] = field(default_factory=dict)  # flight -> (N, 3)
     corrected_residuals: dict[str, np.ndarray] = field(default_factory=dict)
     flights: dict[str, FlightData] = field(default_factory=dict)
+    summaries: dict[str, Any] = field(default_factory=dict)  # whole-flight: force, trend, rotors
     unexplained: dict[str, Any] = field(default_factory=dict)  # what the catalogue leaves
     learned_model: ResidualModel | None = None  # that, learnt (a `learned_residual` effect)
 
@@ -326,6 +328,7 @@ def diagnose(
     all_data = fit_data + hold_data
     all_res = problem.residuals + hold_res
     table = regime_table(all_data, all_res, vehicle)
+    whole = summaries(all_data, all_res, nominal, vehicle)
     hold_problem = _problem(hold_data, nominal, vehicle) if hold_data else None
     if hold_problem is not None:
         gap = held_out_gap(hold_problem, best.values)
@@ -357,7 +360,8 @@ def diagnose(
         chosen=best.values,
         search=trail,
         regimes=table,
-        rules=rules(table),
+        rules=rules(table) + extra_rules(whole),
+        summaries=whole,
         gap=gap,
         vehicle=vehicle,
         left_out=left_out_counts(all_data),

@@ -14,6 +14,7 @@ from learner.gap.candidates import to_world_effects
 from learner.gap.diagnose import Diagnosis
 from learner.gap.regimes import describe_range
 from learner.gap.report_unexplained import markdown_section, write_learned
+from learner.gap.summaries import markdown_section as summaries_section
 
 
 def corrected_world_yaml(nominal_yaml: str, diagnosis: Diagnosis) -> str:
@@ -45,6 +46,7 @@ def figures(diagnosis: Diagnosis, closed_loop: dict[str, Any] | None) -> dict[st
         "gap": diagnosis.gap,
         "unexplained": diagnosis.unexplained,
         "closed_loop": closed_loop,
+        "summaries": diagnosis.summaries,
     }
 
 
@@ -220,6 +222,7 @@ def _markdown(
     lines += [f"- {r}" for r in diagnosis.rules] or ["- no regime with a significant residual"]
     if "plot_regimes" in paths:
         lines += ["", "![regimes](regimes.png)"]
+    lines += summaries_section(diagnosis.summaries)
     lines += [
         "",
         "## Which",
