@@ -17,6 +17,7 @@ import pybullet as pb
 from simbridge.effects.actuators import motor_lag_step
 from simbridge.effects.drag import body_drag_n, rotor_drag_n, wind_velocity_m_s
 from simbridge.effects.ground import ground_effect_force_n, thrust_gain
+from simbridge.effects.learned import learned_force_n
 from simbridge.effects.proximity import WALL_DIRECTIONS, wall_force_n
 from simbridge.frames import Quat, Vec3, quat_from_euler, wxyz_to_xyzw, xyzw_to_wxyz
 from simbridge.rotors import Quad, rotor_forces_n, thrust_and_moments
@@ -26,6 +27,7 @@ from simbridge.world import World
 WORLD_GROUP = 1  # collision group of the ground and obstacles: what rays see
 VEHICLE_GROUP = 2
 NO_HIT = math.inf
+LEARNED_RAY_M = 3.0  # a learnt residual's height rays: beyond, its feature is capped anyway
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,7 @@ class EffectForces:
     wall_effect_n: Vec3
     drag_n: Vec3  # rotor drag + body drag
     wind_m_s: Vec3
+    learned_n: Vec3 = (0.0, 0.0, 0.0)  # a gap diagnosis's learnt residual
 
 
 def _zero3() -> list[float]:
@@ -85,6 +88,9 @@ class Simulation:
         self._ce_cutoff = self._ce.cutoff_for(self._radius) if self._ce else 0.0
         self._lag_tau = fx.motor_lag.time_constant_s if fx.motor_lag else None
         self._drag = fx.rotor_drag is not None or fx.body_drag is not None
+        self._learned = fx.learned_residual
+        self._learned_force = _zero3()
+        self._lift_off_us: int | None = None  # the learnt residual's time since take-off
         self._build_vehicle()
 
         self._rotor_speeds: list[float] = [0.0, 0.0, 0.0, 0.0]
@@ -263,6 +269,8 @@ class Simulation:
             self._wall_force[:] = wf
         if self._drag:
             self._apply_drag(force, m, n)
+        if self._learned is not None:
+            self._apply_learned(force, pos, m, f, heights)
 
         pb.applyExternalForce(body, -1, force, pos, pb.WORLD_FRAME, physicsClientId=cid)
         pb.applyExternalTorque(body, -1, torque, pb.WORLD_FRAME, physicsClientId=cid)
@@ -296,6 +304,29 @@ class Simulation:
         self._drag_force[:] = fw
         self._wind[:] = wind
 
+    def _apply_learned(
+        self,
+        force: list[float],
+        pos: tuple[float, ...],
+        m: tuple[float, ...],
+        f: list[float],
+        heights: list[float],
+    ) -> None:
+        """The residual force a gap diagnosis learnt (simbridge/effects/learned.py), with its
+        time since take-off counted from the first step 5 mm above the start."""
+        if self._lift_off_us is None and pos[2] > self.start_position_m[2] + 0.005:
+            self._lift_off_us = self._time_us
+        since_s = 0.0 if self._lift_off_us is None else (self._time_us - self._lift_off_us) * 1e-6
+        vel, _ = pb.getBaseVelocity(self._body, physicsClientId=self._cid)
+        lf = learned_force_n(
+            self._learned, heights, (m[2], m[5], m[8]), vel, f, since_s,
+            self._radius, self.vehicle.weight_n,
+        )  # fmt: skip
+        force[0] += lf[0]
+        force[1] += lf[1]
+        force[2] += lf[2]
+        self._learned_force[:] = lf
+
     def _ray_tests(
         self, pos: tuple[float, ...], offsets: list[Vec3]
     ) -> tuple[list[float], list[float], tuple[float, ...]]:
@@ -303,8 +334,10 @@ class Simulation:
         starts, ends = [], []
         px, py, pz = pos
         ge, ce, wall = self._ge, self._ce, self.world.effects.wall_effect
-        if ge is not None:
-            length = ge.ray_length_m
+        # down rays for the ground effect, or for a learnt residual (its heights feature)
+        down = ge.ray_length_m if ge is not None else LEARNED_RAY_M if self._learned else None
+        if down is not None:
+            length = down
             for ox, oy, oz in offsets:
                 starts.append((px + ox, py + oy, pz + oz))
                 ends.append((px + ox, py + oy, pz + oz - length))
@@ -324,8 +357,8 @@ class Simulation:
         )
         i = 0
         heights = ceilings = [NO_HIT] * 4
-        if ge is not None:
-            heights = [h[2] * ge.ray_length_m if h[0] >= 0 else NO_HIT for h in hits[0:4]]
+        if down is not None:
+            heights = [h[2] * down if h[0] >= 0 else NO_HIT for h in hits[0:4]]
             i = 4
         if ce is not None:
             ceilings = [h[2] * ce.ray_length_m if h[0] >= 0 else NO_HIT for h in hits[i : i + 4]]
@@ -374,6 +407,7 @@ class Simulation:
             wall_effect_n=tuple(self._wall_force),
             drag_n=tuple(self._drag_force),
             wind_m_s=tuple(self._wind),
+            learned_n=tuple(self._learned_force),
         )
 
     def close(self) -> None:

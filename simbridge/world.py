@@ -213,7 +213,20 @@ def parse_world(data: dict[str, Any], where: str) -> World:
 
 def load_world(name_or_path: str | Path = "default") -> World:
     path = resolve_world_path(name_or_path)
-    return parse_world(load_yaml(path), str(path))
+    world = parse_world(load_yaml(path), str(path))
+    learned = world.effects.learned_residual
+    if learned is not None:  # a model file beside the world file, read from there
+        model = Path(learned.model_path)
+        if not model.is_absolute():
+            model = path.parent / model
+        if not model.is_file():
+            raise ConfigError(f"{path}: effects: learned_residual.model_path: no such file {model}")
+        effects = dataclasses.replace(
+            world.effects,
+            learned_residual=dataclasses.replace(learned, model_path=str(model.resolve())),
+        )
+        world = dataclasses.replace(world, effects=effects)
+    return world
 
 
 def parse_start(text: str) -> tuple[float, float, float]:

@@ -14,8 +14,9 @@ import pytest
 from learner.flightlogs.flightlog import write_log
 from learner.gap.flightdata import prepare
 from mission.campaigns.gap_diagnosis import run_diagnosis
-from simbridge.effects.learned import load_residual_model
-from simbridge.world import load_world
+from simbridge.config import ConfigError
+from simbridge.physics import Simulation
+from simbridge.world import StartPose, load_world
 from tests.test_gap_robust import NANO, synthetic_log, world_file
 
 
@@ -85,9 +86,23 @@ def test_a_force_outside_the_catalogue_is_reported_unexplained_and_learnt(tmp_pa
     assert figures["unexplained"]["sentence"].startswith("the catalogue leaves")
     text = (out / "corrected_world_learned.yaml").read_text()
     assert "learned_residual" in text
-    model = load_residual_model(str(out / "learned_residual.npz"))
-    assert model.force_n(np.zeros((1, len(model.features)))).shape == (1, 3)
     assert "## Unexplained" in (out / "report.md").read_text()
+    # the simulator loads the corrected world (the model read beside it) and feels the push
+    world_learned = load_world(out / "corrected_world_learned.yaml")
+    low = dataclasses.replace(world_learned, start=StartPose(altitude_m=0.15))  # as flown
+    with Simulation(low, NANO) as sim:
+        hover = NANO.hover_rotor_speed_rad_s
+        for _ in range(25):
+            sim.step((hover * 1.01,) * 4)
+        # outwash along +y near the pad: 6% of the weight at 0.15 m
+        assert sim.effect_forces().learned_n[1] > 0.02 * NANO.weight_n
+
+
+def test_a_learned_residual_whose_model_file_is_missing_is_refused(tmp_path: Path) -> None:
+    path = world_file(tmp_path / "world.yaml", effects=[{"name": "learned_residual",
+                                                         "model_path": "gone.npz"}])  # fmt: skip
+    with pytest.raises(ConfigError, match=r"learned_residual.model_path: no such file .*gone.npz"):
+        load_world(path)
 
 
 @pytest.mark.parametrize("seed", [0])

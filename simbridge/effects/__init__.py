@@ -13,6 +13,7 @@ from simbridge.config import ConfigError, build
 from simbridge.effects.actuators import MassErrorParams, MotorLagParams, ThrustCoefficientParams
 from simbridge.effects.drag import BodyDragParams, RotorDragParams, WindParams
 from simbridge.effects.ground import CeilingEffectParams, GroundEffectParams
+from simbridge.effects.learned import LearnedResidualParams
 from simbridge.effects.proximity import WallEffectParams
 from simbridge.effects.sensor_errors import SensorBiasParams, SensorLatencyParams
 
@@ -32,6 +33,7 @@ class EffectSet:
     mass_error: MassErrorParams | None = None
     sensor_latency: SensorLatencyParams | None = None
     sensor_bias: SensorBiasParams | None = None
+    learned_residual: LearnedResidualParams | None = None  # what a gap diagnosis learnt
 
     def names(self) -> list[str]:
         return [f.name for f in fields(self) if getattr(self, f.name) is not None]
@@ -49,6 +51,7 @@ PARAMS_BY_NAME: dict[str, type] = {
     "mass_error": MassErrorParams,
     "sensor_latency": SensorLatencyParams,
     "sensor_bias": SensorBiasParams,
+    "learned_residual": LearnedResidualParams,
 }
 
 
