@@ -28,7 +28,7 @@ def test_a_wind_without_a_drag_in_the_nominal_world_is_named_with_its_speed_and_
     way on every flight. Without yaw, a constant horizontal force is also an accelerometer
     bias in the data, but one of 1.7 m/s^2: beyond a working IMU's, so physics names it."""
     world = world_file(tmp_path / "world.yaml")
-    k = np.array([8.8e-5, 8.8e-5, 4.0e-5])  # four catalogue magnitudes
+    k = np.array([8.8e-5, 4.0e-5])  # four catalogue magnitudes (horizontal, vertical)
     wind = np.array([3.0, -2.0])
     true = {"rotor_drag": k, "wind": wind}
     logs = [

@@ -70,8 +70,8 @@ REFERENCE: tuple[Candidate, ...] = (
     Candidate("ceiling_effect", ("rho",), ("1",), (0.01,), (RHO_MAX,), (1.0,), ("ceiling_effect",)),
     Candidate("wall_effect", ("gain",), ("1",), (-10.0,), (10.0,), (0.5,), ("wall_effect",)),
     Candidate(
-        "rotor_drag", ("kx", "ky", "kz"), ("N/((rad/s)(m/s))",) * 3, (0.0,) * 3, (1e-3,) * 3,
-        (2.2e-5, 2.2e-5, 1.0e-5), ("rotor_drag",),
+        "rotor_drag", ("kxy", "kz"), ("N/((rad/s)(m/s))",) * 2, (0.0,) * 2, (1e-3,) * 2,
+        (2.2e-5, 1.0e-5), ("rotor_drag",),
     ),
     Candidate("body_drag", ("drag_coefficient",), ("1",), (0.0,), (5.0,), (1.0,), ("body_drag",)),
     Candidate(
@@ -113,10 +113,12 @@ PHYSICAL: dict[str, tuple[tuple[float, ...], tuple[float, ...], str]] = {
         (3.0,),
         "a sideways force near a wall of more than 3 times the catalogue's model",
     ),
-    # 10% of the weight per m/s at hover: ten times a quadrotor's measured rotor drag
+    # 10% of the weight per m/s at hover: ten times a quadrotor's measured rotor drag; one
+    # horizontal coefficient: a symmetric rotor's blade flapping drags alike along x and y
+    # (with two, a wind's component along a coefficient near zero is left free)
     "rotor_drag": (
-        (0.0,) * 3,
-        (1.8e-4,) * 3,
+        (0.0,) * 2,
+        (1.8e-4,) * 2,
         "a drag of more than 10% of the weight per m/s of air speed",
     ),
     "body_drag": ((0.0,), (2.5,), "a drag coefficient above a flat plate's (about 2)"),
@@ -259,7 +261,8 @@ def nominal_values(effects: EffectSet, vehicle: Vehicle | None = None) -> Values
     if effects.wall_effect:
         out["wall_effect"] = np.array([effects.wall_effect.gain])
     if effects.rotor_drag:
-        out["rotor_drag"] = np.array(effects.rotor_drag.coefficient_n_s_m)
+        kx, ky, kz = effects.rotor_drag.coefficient_n_s_m
+        out["rotor_drag"] = np.array([0.5 * (kx + ky), kz])  # the candidate's symmetric form
     if effects.body_drag:
         cd = effects.body_drag.drag_coefficient
         if vehicle is not None:
@@ -336,7 +339,7 @@ def _drag(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
     body = np.zeros_like(v_air)
     if "rotor_drag" in values:
         k = values["rotor_drag"]
-        params = RotorDragParams(coefficient_n_s_m=(float(k[0]), float(k[1]), float(k[2])))
+        params = RotorDragParams(coefficient_n_s_m=(float(k[0]), float(k[0]), float(k[1])))
         body += np.column_stack(rotor_drag_n(params, d.commands_rad_s.sum(axis=1), comps))
     if "body_drag" in values:
         params = BodyDragParams(
@@ -358,7 +361,7 @@ def to_world_effects(values: Values, vehicle: Vehicle | None = None) -> list[dic
         elif name == "wall_effect":
             out.append({"name": name, "gain": x[0]})
         elif name == "rotor_drag":
-            out.append({"name": name, "coefficient_n_s_m": x})
+            out.append({"name": name, "coefficient_n_s_m": [x[0], x[0], x[1]]})
         elif name == "body_drag":
             entry: dict = {"name": name, "drag_coefficient": x[0]}
             if vehicle is not None:

@@ -27,6 +27,8 @@ from simbridge.vehicle import Vehicle
 from simbridge.world import World
 
 Z_CRIT = 1.959964
+ALTERNATIVE_BIC = 10.0  # a collinear alternative this much worse does not carry the effect
+TRADE_OFF = 0.95  # unless, fitted beside it, some parameters of the two correlate this much
 
 
 @dataclass
@@ -165,7 +167,15 @@ def _alternatives_ruled_out(
         names = tuple(other if n == name else n for n in best.names)
         alt = gapfit.fit(problem, names, max_nfev=60, start=best.values)
         bad = implausible_parameters(other, alt.values[other], cat)
-        if bad:
+        if alt.bic - best.bic > ALTERNATIVE_BIC:
+            # it cannot replace the effect as a whole; it may still trade off against part of
+            # it (an accelerometer's z bias against a thrust scale, beside an x bias)
+            if _trades_off(problem, best, name, other) < TRADE_OFF:
+                out[other] = (
+                    f"swapped in for {name}, it fits the flights worse (BIC "
+                    f"+{alt.bic - best.bic:.0f}), and beside it the two do not trade off"
+                )
+        elif bad:
             h = bad[0]
             out[other] = (
                 f"it would take {h['parameter']} {h['value']:.3g}, outside its physical range "
@@ -174,6 +184,20 @@ def _alternatives_ruled_out(
         elif gapfit.at_bound(other, alt.values[other], cat):
             out[other] = "it would sit on a bound of the search"
     return out
+
+
+def _trades_off(problem: gapfit.Problem, best: gapfit.Fit, name: str, other: str) -> float:
+    """The largest correlation between a parameter of `name` and one of `other` when both are
+    fitted beside the chosen set."""
+    f = gapfit.fit(problem, (*best.names, other), max_nfev=60, start=best.values)
+    sd = np.sqrt(np.maximum(np.diag(f.cov), 1e-300))
+    corr = f.cov / np.outer(sd, sd)
+    index, i = {}, 0
+    for n in f.names:
+        k = len(f.values[n])
+        index[n] = slice(i, i + k)
+        i += k
+    return float(np.max(np.abs(corr[index[name], index[other]])))
 
 
 def _refused(trail: list[dict]) -> dict[str, dict]:
