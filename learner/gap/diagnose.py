@@ -167,15 +167,7 @@ def _alternatives_ruled_out(
         names = tuple(other if n == name else n for n in best.names)
         alt = gapfit.fit(problem, names, max_nfev=60, start=best.values)
         bad = implausible_parameters(other, alt.values[other], cat)
-        if alt.bic - best.bic > ALTERNATIVE_BIC:
-            # it cannot replace the effect as a whole; it may still trade off against part of
-            # it (an accelerometer's z bias against a thrust scale, beside an x bias)
-            if _trades_off(problem, best, name, other) < TRADE_OFF:
-                out[other] = (
-                    f"swapped in for {name}, it fits the flights worse (BIC "
-                    f"+{alt.bic - best.bic:.0f}), and beside it the two do not trade off"
-                )
-        elif bad:
+        if bad:
             h = bad[0]
             out[other] = (
                 f"it would take {h['parameter']} {h['value']:.3g}, outside its physical range "
@@ -183,6 +175,16 @@ def _alternatives_ruled_out(
             )
         elif gapfit.at_bound(other, alt.values[other], cat):
             out[other] = "it would sit on a bound of the search"
+        # worse as a whole, it may still trade off against part of the effect (an
+        # accelerometer's z bias against a thrust scale, beside an x bias)
+        elif (
+            alt.bic - best.bic > ALTERNATIVE_BIC
+            and _trades_off(problem, best, name, other) < TRADE_OFF
+        ):
+            out[other] = (
+                f"swapped in for {name}, it fits the flights worse (BIC "
+                f"+{alt.bic - best.bic:.0f}), and beside it the two do not trade off"
+            )
     return out
 
 
