@@ -54,6 +54,9 @@ def test_missing_diagnosis_fields_read_missing_and_do_not_pass():
     v = score(CASES["ooc_thrust_decay"], result())["uncatalogued"]
     assert v["located"] is None and v["unexplained_share"] is None
     assert v["learned_shrink"] is None and not v["passed"]
+    trend = {"trend": {"significant": True, "slope_share_per_min": -0.18}}
+    v = score(CASES["ooc_thrust_decay"], result(summaries=trend))["uncatalogued"]
+    assert v["located"] is True
 
 
 def test_a_weak_rotor_is_located_by_a_significant_negative_thrust_error_on_its_rotor():

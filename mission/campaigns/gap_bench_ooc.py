@@ -3,7 +3,8 @@ name it, so it is scored on what it says about it instead:
 
 - located: the unexplained residual is placed in the expected regime (an entry of
   `unexplained.where` with the expected variable and component, its bin starting below a
-  bound), or, for a weak rotor, a significant negative thrust error on that rotor;
+  bound; for the time since take-off, also a significant falling trend in the whole-flight
+  summaries), or, for a weak rotor, a significant negative thrust error on that rotor;
 - no catalogue effect declared present with confidence (`confident`, true when absent);
 - the unexplained share reported (a number);
 - the learnt residual shrinks the held-out force gap by at least LEARNED_SHRINK_MIN.
@@ -30,6 +31,12 @@ def _rotors(result: dict[str, Any]) -> list[dict[str, Any]] | None:
     return rotors if isinstance(rotors, list) else None
 
 
+def _falling(result: dict[str, Any]) -> bool:
+    """The diagnosis's trend summary: the vertical residual falls significantly over time."""
+    trend = (result.get("summaries") or {}).get("trend") or {}
+    return bool(trend.get("significant")) and trend.get("slope_share_per_min", 0.0) < 0
+
+
 def located(expected: tuple[Any, ...], result: dict[str, Any]) -> bool | None:
     """Whether the diagnosis places the residual where the effect acts; None: not reported."""
     if not expected:
@@ -44,6 +51,8 @@ def located(expected: tuple[Any, ...], result: dict[str, Any]) -> bool | None:
         )
     variable, component, upper = expected
     where = (result.get("unexplained") or {}).get("where")
+    if variable == "time_since_takeoff_s" and component == "vertical" and _falling(result):
+        return True  # the whole-flight trend since take-off is that regime, read as a slope
     if where is None:
         return None
     return any(
