@@ -19,6 +19,13 @@ from simbridge.effects.drag import body_drag_n, rotor_drag_n, wind_velocity_m_s
 from simbridge.effects.ground import ground_effect_force_n, thrust_gain
 from simbridge.effects.learned import learned_force_n
 from simbridge.effects.proximity import WALL_DIRECTIONS, wall_force_n
+from simbridge.effects.uncatalogued import (
+    TAKEOFF_HEIGHT_M,
+    asymmetric_forces_n,
+    exponential_gain,
+    outwash_force_n,
+    thrust_decay_scale,
+)
 from simbridge.frames import Quat, Vec3, quat_from_euler, wxyz_to_xyzw, xyzw_to_wxyz
 from simbridge.rotors import Quad, rotor_forces_n, thrust_and_moments
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
@@ -56,6 +63,10 @@ class EffectForces:
     drag_n: Vec3  # rotor drag + body drag
     wind_m_s: Vec3
     learned_n: Vec3 = (0.0, 0.0, 0.0)  # a gap diagnosis's learnt residual
+    # outside the catalogue (simbridge/effects/uncatalogued.py)
+    ground_effect_exponential_n: Vec3 = (0.0, 0.0, 0.0)
+    outwash_n: Vec3 = (0.0, 0.0, 0.0)
+    thrust_scale: float = 1.0  # thrust_decay's C_T scale
 
 
 def _zero3() -> list[float]:
@@ -90,7 +101,14 @@ class Simulation:
         self._drag = fx.rotor_drag is not None or fx.body_drag is not None
         self._learned = fx.learned_residual
         self._learned_force = _zero3()
-        self._lift_off_us: int | None = None  # the learnt residual's time since take-off
+        self._gex, self._outwash = fx.ground_effect_exponential, fx.ground_outwash
+        self._gex_force, self._outwash_force = _zero3(), _zero3()
+        self._decay, self._asym = fx.thrust_decay, fx.rotor_asymmetry
+        self._thrust_scale = 1.0
+        # one set of down rays per rotor serves every effect that reads rotor heights
+        lengths = [e.ray_length_m for e in (self._ge, self._gex) if e is not None]
+        self._down_m = max(lengths + ([LEARNED_RAY_M] if self._learned else []), default=None)
+        self._lift_off_us: int | None = None  # see time_since_takeoff_s
         self._build_vehicle()
 
         self._rotor_speeds: list[float] = [0.0, 0.0, 0.0, 0.0]
@@ -158,14 +176,14 @@ class Simulation:
             self._body, -1, VEHICLE_GROUP, WORLD_GROUP, physicsClientId=cid
         )
         x, y = start.xy_m
-        z = start.altitude_m
-        if z is None:  # rest on whatever surface is below the start point
-            ceiling = self.world.ceiling_height_m
-            top = 1000.0 if ceiling is None else ceiling - 1e-3  # under a ceiling, not on it
-            hit = pb.rayTest(
-                [x, y, top], [x, y, -1.0], collisionFilterMask=WORLD_GROUP, physicsClientId=cid
-            )[0]
-            z = (hit[3][2] if hit[0] >= 0 else 0.0) + half[2]
+        # the surface below the start point: the vehicle rests there unless started in the air
+        ceiling = self.world.ceiling_height_m
+        top = 1000.0 if ceiling is None else ceiling - 1e-3  # under a ceiling, not on it
+        hit = pb.rayTest(
+            [x, y, top], [x, y, -1.0], collisionFilterMask=WORLD_GROUP, physicsClientId=cid
+        )[0]
+        self.resting_height_m = (hit[3][2] if hit[0] >= 0 else 0.0) + half[2]
+        z = start.altitude_m if start.altitude_m is not None else self.resting_height_m
         self.start_quaternion = quat_from_euler(
             math.radians(start.roll_deg), math.radians(start.pitch_deg), math.radians(start.yaw_deg)
         )
@@ -186,6 +204,14 @@ class Simulation:
     @property
     def time_s(self) -> float:
         return self._time_us * 1e-6
+
+    @property
+    def time_since_takeoff_s(self) -> float:
+        """Time since the first physics step at which the body was more than 5 mm above its
+        resting height over the start point (at once for a start in the air); 0 before."""
+        if self._lift_off_us is None:
+            return 0.0
+        return (self._time_us - self._lift_off_us) * 1e-6
 
     def release(self) -> None:
         """Take the vehicle off its stand: from now on physics integrates it."""
@@ -210,6 +236,8 @@ class Simulation:
         cid, body, dt = self._cid, self._body, self._dt
         pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
         m = pb.getMatrixFromQuaternion(orn)
+        if self._lift_off_us is None and pos[2] > self.resting_height_m + TAKEOFF_HEIGHT_M:
+            self._lift_off_us = self._time_us
         n = self._rotor_speeds
         if self._lag_tau is None:
             n[0], n[1], n[2], n[3] = cmd
@@ -217,7 +245,13 @@ class Simulation:
             tau = self._lag_tau
             for i in range(4):
                 n[i] = motor_lag_step(n[i], cmd[i], dt, tau)
-        f = rotor_forces_n(self._c_t, n)  # equation 3.5
+        if self._decay is None:
+            f = rotor_forces_n(self._c_t, n)  # equation 3.5
+        else:
+            self._thrust_scale = thrust_decay_scale(self._decay, self.time_since_takeoff_s)
+            f = rotor_forces_n(self._c_t * self._thrust_scale, n)
+        if self._asym is not None:
+            f = asymmetric_forces_n(self._asym, f)
 
         # Rotor hubs relative to the centre of mass, in the world frame.
         offsets = [
@@ -228,7 +262,7 @@ class Simulation:
             )
             for rx, ry, rz in self._rotors_body
         ]
-        heights, ceilings, walls = self._ray_tests(pos, offsets)
+        heights, ceilings, walls, below = self._ray_tests(pos, offsets)
 
         # Equation 3.6 in the body frame, ceiling effect as extra thrust on each rotor.
         if self._ce is not None:
@@ -251,14 +285,31 @@ class Simulation:
         if self._ge is not None:  # equation 3.4: vertical, at each rotor hub
             rho, radius, cut = self._ge.rho, self._radius, self._ge_cutoff
             total = 0.0
+            reach = self._ge.ray_length_m  # the rays may reach further for another effect
             for i in range(4):
-                g = ground_effect_force_n(f[i], heights[i], rho, radius, cut)
+                h = heights[i] if heights[i] <= reach else NO_HIT
+                g = ground_effect_force_n(f[i], h, rho, radius, cut)
                 self._ge_rotor[i] = g
                 total += g
                 torque[0] += offsets[i][1] * g
                 torque[1] -= offsets[i][0] * g
             force[2] += total
             self._ge_force[2] = total
+        if self._gex is not None:  # the exponential shape, vertical at each hub likewise
+            gain, decay, reach = (
+                self._gex.gain,
+                self._gex.decay_radii * self._radius,
+                self._gex.ray_length_m,
+            )
+            total = 0.0
+            for i in range(4):
+                h = heights[i]
+                g = f[i] * exponential_gain(h, gain, decay) if h <= reach else 0.0
+                total += g
+                torque[0] += offsets[i][1] * g
+                torque[1] -= offsets[i][0] * g
+            force[2] += total
+            self._gex_force[2] = total
         self._heights = heights
 
         fx = self.world.effects
@@ -267,10 +318,15 @@ class Simulation:
             force[0] += wf[0]
             force[1] += wf[1]
             self._wall_force[:] = wf
+        if self._outwash is not None:
+            ow = outwash_force_n(self._outwash, thrust, below, self._radius)
+            force[0] += ow[0]
+            force[1] += ow[1]
+            self._outwash_force[:] = ow
         if self._drag:
             self._apply_drag(force, m, n)
         if self._learned is not None:
-            self._apply_learned(force, pos, m, f, heights)
+            self._apply_learned(force, m, f, heights)
 
         pb.applyExternalForce(body, -1, force, pos, pb.WORLD_FRAME, physicsClientId=cid)
         pb.applyExternalTorque(body, -1, torque, pb.WORLD_FRAME, physicsClientId=cid)
@@ -307,16 +363,12 @@ class Simulation:
     def _apply_learned(
         self,
         force: list[float],
-        pos: tuple[float, ...],
         m: tuple[float, ...],
         f: list[float],
         heights: list[float],
     ) -> None:
-        """The residual force a gap diagnosis learnt (simbridge/effects/learned.py), with its
-        time since take-off counted from the first step 5 mm above the start."""
-        if self._lift_off_us is None and pos[2] > self.start_position_m[2] + 0.005:
-            self._lift_off_us = self._time_us
-        since_s = 0.0 if self._lift_off_us is None else (self._time_us - self._lift_off_us) * 1e-6
+        """The residual force a gap diagnosis learnt (simbridge/effects/learned.py)."""
+        since_s = self.time_since_takeoff_s
         vel, _ = pb.getBaseVelocity(self._body, physicsClientId=self._cid)
         lf = learned_force_n(
             self._learned, heights, (m[2], m[5], m[8]), vel, f, since_s,
@@ -329,18 +381,17 @@ class Simulation:
 
     def _ray_tests(
         self, pos: tuple[float, ...], offsets: list[Vec3]
-    ) -> tuple[list[float], list[float], tuple[float, ...]]:
-        """One batch of rays: down and up from each rotor hub, sideways from the centre."""
+    ) -> tuple[list[float], list[float], tuple[float, ...], float]:
+        """One batch of rays: down and up from each rotor hub, sideways from the centre, and
+        down from the centre (the outwash's height)."""
         starts, ends = [], []
         px, py, pz = pos
-        ge, ce, wall = self._ge, self._ce, self.world.effects.wall_effect
-        # down rays for the ground effect, or for a learnt residual (its heights feature)
-        down = ge.ray_length_m if ge is not None else LEARNED_RAY_M if self._learned else None
+        ce, wall, outwash = self._ce, self.world.effects.wall_effect, self._outwash
+        down = self._down_m
         if down is not None:
-            length = down
             for ox, oy, oz in offsets:
                 starts.append((px + ox, py + oy, pz + oz))
-                ends.append((px + ox, py + oy, pz + oz - length))
+                ends.append((px + ox, py + oy, pz + oz - down))
         if ce is not None:
             length = ce.ray_length_m
             for ox, oy, oz in offsets:
@@ -350,8 +401,11 @@ class Simulation:
             for ux, uy, _ in WALL_DIRECTIONS:
                 starts.append(pos)
                 ends.append((px + ux * wall.range_m, py + uy * wall.range_m, pz))
+        if outwash is not None:
+            starts.append(pos)
+            ends.append((px, py, pz - outwash.ray_length_m))
         if not starts:
-            return [NO_HIT] * 4, [NO_HIT] * 4, (NO_HIT,) * 4
+            return [NO_HIT] * 4, [NO_HIT] * 4, (NO_HIT,) * 4, NO_HIT
         hits = pb.rayTestBatch(
             starts, ends, collisionFilterMask=WORLD_GROUP, physicsClientId=self._cid
         )
@@ -366,7 +420,11 @@ class Simulation:
         walls: tuple[float, ...] = (NO_HIT,) * 4
         if wall is not None:
             walls = tuple(h[2] * wall.range_m if h[0] >= 0 else NO_HIT for h in hits[i : i + 4])
-        return heights, ceilings, walls
+            i += 4
+        below = NO_HIT
+        if outwash is not None and hits[i][0] >= 0:
+            below = hits[i][2] * outwash.ray_length_m
+        return heights, ceilings, walls, below
 
     # -- reading ------------------------------------------------------------------------
 
@@ -408,6 +466,9 @@ class Simulation:
             drag_n=tuple(self._drag_force),
             wind_m_s=tuple(self._wind),
             learned_n=tuple(self._learned_force),
+            ground_effect_exponential_n=tuple(self._gex_force),
+            outwash_n=tuple(self._outwash_force),
+            thrust_scale=self._thrust_scale,
         )
 
     def close(self) -> None:

@@ -14,6 +14,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from mission.campaigns.gap_bench_ooc import summary as ooc_summary
+from mission.campaigns.gap_bench_ooc import verdict, verdict_text
 from mission.campaigns.gap_flights import BENCH_NOISE, bench_mission, real_log
 
 FIT_SEEDS = (0, 1)
@@ -21,6 +23,7 @@ HOLD_SEEDS = (100,)
 BASE: dict[str, Any] = {"vehicle": "nano", "physics_rate_hz": 1000, "control_period_s": 0.004}
 GE = {"name": "ground_effect", "rho": 1.0}
 DRAG = {"name": "rotor_drag"}
+PARAMETER_TARGET = 0.10  # relative parameter error of a catalogue case (issue 16)
 WALL = [{"kind": "wall", "start_m": [-2.0, 0.6], "end_m": [2.0, 0.6], "height_m": 2.0}]
 
 
@@ -33,6 +36,15 @@ class Case:
     nominal: tuple[dict, ...] = (GE,)
     world: dict[str, Any] = field(default_factory=dict)  # geometry shared by both worlds
     unexcited: tuple[str, ...] = ()  # effects the flights cannot excite
+    # nominal effects the real world lacks (its hidden effect replaces them)
+    replaced: tuple[str, ...] = ()
+    # the hidden effects are outside the diagnosis's catalogue (simbridge/effects/
+    # uncatalogued.py): scored on locating them, not naming them
+    uncatalogued: bool = False
+    # where an out-of-catalogue effect should be located: (regime variable, residual
+    # component, upper bound of the bin's low edge or None), as the diagnosis's
+    # `unexplained.where` entries read, or ("rotor", i) for a rotor whose thrust is low
+    expected_regime: tuple[Any, ...] = ()
 
 
 def _cases() -> list[Case]:
@@ -184,13 +196,90 @@ def _cases() -> list[Case]:
                 unexcited=("rotor_drag",) if kind == "hover" else (),
             )
         )
+    c += _hard_cases(kk)
     c.append(Case("null_mixed", (), {}))
     c.append(Case("null_aggressive", (), {}, kind="aggressive"))
     c.append(Case("null_hover", (), {}, kind="hover"))
     return c
 
 
+def _hard_cases(drag: list[float]) -> list[Case]:
+    """Issue 16: catalogue effects far from nominal beside a second one, three at once, and
+    effects outside the catalogue. Magnitudes: clear in the residual in their regime (several
+    % of the weight), yet flown and landed by the autopilot, which knows none of them."""
+    return [
+        # rho 3 against the nominal 1 (cut-off 0.03 m): 35% more thrust at the 4 cm pass,
+        # against the autopilot's 9%; a lag the aggressive legs excite
+        Case(
+            "far_ground_effect_lag",
+            ({"name": "ground_effect", "rho": 3.0}, {"name": "motor_lag", "time_constant_s": 0.04}),
+            {"ground_effect": {"rho": 3.0}, "motor_lag": {"tau": 0.04}},
+            kind="aggressive",
+        ),
+        Case(
+            "three_effects",
+            (
+                {"name": "ground_effect", "rho": 2.0},
+                {"name": "rotor_drag", "coefficient_n_s_m": drag},
+                {"name": "thrust_coefficient", "scale": 1.05},
+            ),
+            {
+                "ground_effect": {"rho": 2.0},
+                "rotor_drag": dict(zip(("kx", "ky", "kz"), drag, strict=True)),
+                "thrust_coefficient": {"scale": 1.05},
+            },
+            nominal=(),
+        ),
+        # the real ground effect has another shape than the nominal thesis law (rho 1), which
+        # it replaces: as strong at rest (53% of a rotor's thrust; less and the autopilot,
+        # subtracting the law's 53%, never leaves the ground), 30% at 4 cm (the law: 9%), 8%
+        # at 10 cm (1.4%), nothing beyond about 5 rotor radii
+        Case(
+            "ooc_ground_shape",
+            ({"name": "ground_effect_exponential", "gain": 0.7, "decay_radii": 1.0},),
+            {},
+            replaced=("ground_effect",),
+            uncatalogued=True,
+            expected_regime=("height_r", "vertical", 6.0),
+        ),
+        # 0.3% of the thrust per second: 6% of the weight after a 20 s flight; without
+        # integral action the vehicle sags (about 0.1 m per % of thrust lost)
+        Case(
+            "ooc_thrust_decay",
+            ({"name": "thrust_decay", "rate_per_s": 0.003},),
+            {},
+            uncatalogued=True,
+            expected_regime=("time_since_takeoff_s", "vertical", None),
+        ),
+        # the back-right rotor gives 90% of its modelled thrust: 2.5% of the weight missing
+        # and a steady torque the attitude loop holds. At 85% the vehicle, sagging 0.4 m
+        # below its setpoints, hardly leaves the ground (9 cm at most)
+        Case(
+            "ooc_weak_rotor",
+            ({"name": "rotor_asymmetry", "scales": [1.0, 1.0, 0.9, 1.0]},),
+            {},
+            uncatalogued=True,
+            expected_regime=("rotor", 2),
+        ),
+        # 8% of the thrust toward +x at the surface, 5% at the 4 cm pass, 1% at 0.15 m
+        Case(
+            "ooc_outwash",
+            ({"name": "ground_outwash", "gain": 0.08, "decay_radii": 2.0, "direction_deg": 0.0},),
+            {},
+            uncatalogued=True,
+            expected_regime=("height_r", "world_x", 6.0),
+        ),
+    ]
+
+
 CASES: dict[str, Case] = {c.name: c for c in _cases()}
+
+
+def real_effects(case: Case) -> tuple[dict, ...]:
+    """The real world's effects: the nominal ones the hidden ones neither replace nor
+    override, then the hidden ones."""
+    dropped = {e["name"] for e in case.hidden} | set(case.replaced)
+    return tuple(e for e in case.nominal if e["name"] not in dropped) + case.hidden
 
 
 def _world_file(path: Path, case: Case, effects: tuple[dict, ...]) -> Path:
@@ -218,12 +307,7 @@ def run_case(case: Case, out: Path, replay: bool = True, record: bool = False) -
     from mission.campaigns.gap_diagnosis import run_diagnosis
 
     folder = out / case.name
-    hidden_names = {e["name"] for e in case.hidden}
-    real = _world_file(
-        folder / "real_world.yaml",
-        case,
-        tuple(e for e in case.nominal if e["name"] not in hidden_names) + case.hidden,
-    )
+    real = _world_file(folder / "real_world.yaml", case, real_effects(case))
     nominal = _world_file(folder / "nominal_world.yaml", case, case.nominal)
     _drop_stale_flights(folder, real.read_text() + case.kind)
     logs = {}
@@ -275,18 +359,29 @@ def score(case: Case, result: dict[str, Any]) -> dict[str, Any]:
     reported_set = {e for e, v in per.items() if v["reported"]}
     expected = set(case.truth) - set(case.unexcited)
     gap = result["gap"]
+    errors = [x for v in per.values() for x in v.get("relative_errors", [])]
+    exact = reported_set == expected
     return {
         "case": case.name,
         "truth": sorted(case.truth),
         "reported": sorted(reported_set),
-        "exact": reported_set == expected,
+        # out of the catalogue there is no set to name: the verdict below scores it
+        "exact": None if case.uncatalogued else exact,
+        "max_relative_error": max(errors) if errors else None,
+        # issue 16's catalogue target: the exact set, every parameter within 10%
+        "catalogue_target": (
+            exact and all(e <= PARAMETER_TARGET for e in errors)
+            if case.truth and not case.uncatalogued
+            else None
+        ),
+        "uncatalogued": verdict(case.expected_regime, result) if case.uncatalogued else None,
         "unexcited_reported_not_identifiable": unexcited_ok if case.unexcited else None,
         "effects": per,
         "force_shrink": gap["force_rms_n"]["shrink"],
         "force_before_n": gap["force_rms_n"]["before"],
         "rollout_shrink": gap.get("rollout_rms_m", {}).get("shrink"),
         "closed_loop": result.get("closed_loop"),
-        "false_alarm": bool(reported_set) if not case.truth else None,
+        "false_alarm": bool(reported_set) if not case.truth and not case.uncatalogued else None,
     }
 
 
@@ -312,15 +407,23 @@ def run_bench(cases: list[Case], out: Path, replay: bool = False) -> dict[str, A
 def _line(r: dict[str, Any]) -> str:
     if "error" in r:
         return r["error"]
+    if r.get("uncatalogued"):
+        return f"out of the catalogue: {verdict_text(r['uncatalogued'])}"
     return (
         f"truth {r['truth']} reported {r['reported']} exact {r['exact']} "
         f"force shrink {r['force_shrink'] * 100:.0f}%"
     )
 
 
+def _mark(flag: bool | None) -> str:
+    return "-" if flag is None else "yes" if flag else "no"
+
+
 def summarise(results: list[dict[str, Any]], cases: list[Case]) -> dict[str, Any]:
     ok = [r for r in results if "error" not in r]
     by_case = {c.name: c for c in cases}
+    exact = [r["exact"] for r in ok if r.get("exact") is not None]
+    target = [r["catalogue_target"] for r in ok if r.get("catalogue_target") is not None]
     singles = [
         r for r in ok if len(by_case[r["case"]].truth) == 1 and not by_case[r["case"]].unexcited
     ]
@@ -335,8 +438,8 @@ def summarise(results: list[dict[str, Any]], cases: list[Case]) -> dict[str, Any
     cov = [x for r in ok for v in r["effects"].values() for x in v.get("covered", [])]
     per_param: dict[str, Any] = {}
     for e in effects:
-        ee = [x for r in ok for x in r["effects"][e].get("relative_errors", [])]
-        cc = [x for r in ok for x in r["effects"][e].get("covered", [])]
+        ee = [x for r in ok for x in r["effects"].get(e, {}).get("relative_errors", [])]
+        cc = [x for r in ok for x in r["effects"].get(e, {}).get("covered", [])]
         if ee:
             per_param[e] = {"median_error": float(np.median(ee)), "coverage": float(np.mean(cc))}
     shrinks = [r["force_shrink"] for r in ok if r["truth"] and not by_case[r["case"]].unexcited]
@@ -349,7 +452,9 @@ def summarise(results: list[dict[str, Any]], cases: list[Case]) -> dict[str, Any
     return {
         "cases": len(results),
         "failed": len(results) - len(ok),
-        "exact_set_rate": float(np.mean([r["exact"] for r in ok])) if ok else float("nan"),
+        "exact_set_rate": float(np.mean(exact)) if exact else float("nan"),
+        "catalogue_target_rate": float(np.mean(target)) if target else float("nan"),
+        "uncatalogued": ooc_summary([r["uncatalogued"] for r in ok if r.get("uncatalogued")]),
         "f1_single": f1,
         "median_relative_parameter_error": float(np.median(errs)) if errs else float("nan"),
         "coverage95": float(np.mean(cov)) if cov else float("nan"),
@@ -365,14 +470,16 @@ def summarise(results: list[dict[str, Any]], cases: list[Case]) -> dict[str, Any
 
 def table(scores: dict[str, Any]) -> str:
     s = scores["summary"]
-    lines = ["case                      exact  force shrink  reported"]
+    lines = ["case                      exact  <=10%  force shrink  reported / out-of-catalogue"]
     for r in scores["cases"]:
         if "error" in r:
             lines.append(f"{r['case']:25s} ERROR {r['error']}")
             continue
+        ooc = r.get("uncatalogued")
+        what = verdict_text(ooc) if ooc else ", ".join(r["reported"]) or "-"
         lines.append(
-            f"{r['case']:25s} {'yes' if r['exact'] else 'no ':5s}  {r['force_shrink'] * 100:8.0f}%"
-            f"     {', '.join(r['reported']) or '-'}"
+            f"{r['case']:25s} {_mark(r['exact']):5s}  {_mark(r.get('catalogue_target')):5s}"
+            f"  {r['force_shrink'] * 100:8.0f}%     {what}"
         )
     nan = float("nan")
     lines += ["", "effect               F1 (single)  median param error  coverage95"]
@@ -391,4 +498,13 @@ def table(scores: dict[str, Any]) -> str:
         f"unexcited reported not identifiable {s['unexcited_not_identifiable']}; "
         f"wall {scores.get('wall_s', float('nan')):.0f} s",
     ]
+    t, u = s.get("catalogue_target_rate", nan), s.get("uncatalogued") or {}
+    lines.append(f"catalogue cases with the exact set and every parameter within 10%: {t:.2f}")
+    if u.get("cases"):
+        lines.append(
+            f"out of the catalogue ({u['cases']} cases): located {u['located']:.2f}; no "
+            f"catalogue effect named with confidence {u['no_confident_catalogue']:.2f}; "
+            f"unexplained share reported {u['share_reported']:.2f}; learnt shrink >= 60% "
+            f"{u['learned_shrink_ok']:.2f}; all four {u['passed']:.2f}"
+        )
     return "\n".join(lines)

@@ -16,6 +16,12 @@ from simbridge.effects.ground import CeilingEffectParams, GroundEffectParams
 from simbridge.effects.learned import LearnedResidualParams
 from simbridge.effects.proximity import WallEffectParams
 from simbridge.effects.sensor_errors import SensorBiasParams, SensorLatencyParams
+from simbridge.effects.uncatalogued import (
+    GroundEffectExponentialParams,
+    GroundOutwashParams,
+    RotorAsymmetryParams,
+    ThrustDecayParams,
+)
 
 
 @dataclass(frozen=True)
@@ -34,6 +40,12 @@ class EffectSet:
     sensor_latency: SensorLatencyParams | None = None
     sensor_bias: SensorBiasParams | None = None
     learned_residual: LearnedResidualParams | None = None  # what a gap diagnosis learnt
+    # outside the diagnosis's catalogue (simbridge/effects/uncatalogued.py): the gap bench's
+    # tests of what the diagnosis cannot name
+    ground_effect_exponential: GroundEffectExponentialParams | None = None
+    thrust_decay: ThrustDecayParams | None = None
+    rotor_asymmetry: RotorAsymmetryParams | None = None
+    ground_outwash: GroundOutwashParams | None = None
 
     def names(self) -> list[str]:
         return [f.name for f in fields(self) if getattr(self, f.name) is not None]
@@ -52,7 +64,12 @@ PARAMS_BY_NAME: dict[str, type] = {
     "sensor_latency": SensorLatencyParams,
     "sensor_bias": SensorBiasParams,
     "learned_residual": LearnedResidualParams,
+    "ground_effect_exponential": GroundEffectExponentialParams,
+    "thrust_decay": ThrustDecayParams,
+    "rotor_asymmetry": RotorAsymmetryParams,
+    "ground_outwash": GroundOutwashParams,
 }
+UNCATALOGUED = ("ground_effect_exponential", "thrust_decay", "rotor_asymmetry", "ground_outwash")
 
 
 def parse_effects(entries: Any, where: str) -> EffectSet:

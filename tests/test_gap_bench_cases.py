@@ -1,0 +1,95 @@
+"""The gap bench's issue-16 cases and their scoring, on hand-written diagnosis results (no
+flight): out-of-catalogue verdicts read the diagnosis defensively, catalogue cases are held
+to the exact set and 10% parameter error."""
+
+from __future__ import annotations
+
+from mission.campaigns.gap_bench import CASES, real_effects, score, summarise, table
+from simbridge.effects import PARAMS_BY_NAME, UNCATALOGUED, parse_effects
+
+
+def result(**extra) -> dict:
+    base = {
+        "effects": {"ground_effect": {"status": "absent"}, "rotor_drag": {"status": "absent"}},
+        "gap": {"force_rms_n": {"before": 0.01, "after": 0.008, "shrink": 0.2}},
+    }
+    base.update(extra)
+    return base
+
+
+def test_the_new_cases_are_flown_in_valid_worlds():
+    for name in ("far_ground_effect_lag", "three_effects", "ooc_ground_shape",
+                 "ooc_thrust_decay", "ooc_weak_rotor", "ooc_outwash"):  # fmt: skip
+        case = CASES[name]
+        parse_effects([dict(e) for e in real_effects(case)], name)
+        assert case.uncatalogued == name.startswith("ooc_")
+        if case.uncatalogued:
+            assert case.expected_regime and not case.truth
+            assert {e["name"] for e in case.hidden} <= set(UNCATALOGUED)
+        else:
+            assert all(e in PARAMS_BY_NAME for e in case.truth)
+    # the exponential shape replaces the nominal thesis law in the real world
+    assert [e["name"] for e in real_effects(CASES["ooc_ground_shape"])] == [
+        "ground_effect_exponential"
+    ]
+
+
+def test_an_out_of_catalogue_case_passes_when_located_unnamed_reported_and_learnt():
+    case = CASES["ooc_outwash"]
+    where = [{"variable": "height_r", "low": 0.5, "high": 1.0, "component": "world_x",
+              "mean_share": 0.04}]  # fmt: skip
+    learned = {"before": 0.01, "after": 0.003, "shrink": 0.7}
+    r = result(unexplained={"share": 0.7, "where": where})
+    r["gap"]["force_rms_n_learned"] = learned
+    r["effects"]["rotor_drag"] = {"status": "present", "confident": False}
+    s = score(case, r)
+    v = s["uncatalogued"]
+    assert v["passed"] and v["located"] and v["confident_catalogue"] == []
+    assert s["exact"] is None and s["false_alarm"] is None
+    r["effects"]["rotor_drag"]["confident"] = True
+    assert not score(case, r)["uncatalogued"]["passed"]
+
+
+def test_missing_diagnosis_fields_read_missing_and_do_not_pass():
+    v = score(CASES["ooc_thrust_decay"], result())["uncatalogued"]
+    assert v["located"] is None and v["unexplained_share"] is None
+    assert v["learned_shrink"] is None and not v["passed"]
+    trend = {"trend": {"significant": True, "slope_share_per_min": -0.18}}
+    v = score(CASES["ooc_thrust_decay"], result(summaries=trend))["uncatalogued"]
+    assert v["located"] is True
+
+
+def test_a_weak_rotor_is_located_by_a_significant_negative_thrust_error_on_its_rotor():
+    case = CASES["ooc_weak_rotor"]
+    rotors = [{"rotor": i, "thrust_error": -0.1 if i == 2 else 0.0, "significant": i == 2}
+              for i in range(4)]  # fmt: skip
+    assert score(case, result(rotors=rotors))["uncatalogued"]["located"] is True
+    nested = result(summaries={"rotors": {"rotors": rotors}})
+    assert score(case, nested)["uncatalogued"]["located"] is True
+    rotors[2]["thrust_error"] = 0.1
+    assert score(case, result(rotors=rotors))["uncatalogued"]["located"] is False
+
+
+def test_a_catalogue_case_meets_its_target_with_the_exact_set_within_ten_percent():
+    case = CASES["far_ground_effect_lag"]
+
+    def fitted(rho: float) -> dict:
+        return result(
+            effects={
+                "ground_effect": {"status": "present", "parameters": {
+                    "rho": {"value": rho, "ci95": [rho - 0.2, rho + 0.2]}}},
+                "motor_lag": {"status": "present", "parameters": {
+                    "tau": {"value": 0.041, "ci95": [0.035, 0.045]}}},
+            }
+        )  # fmt: skip
+
+    good, far = score(case, fitted(3.2)), score(case, fitted(3.5))
+    assert good["exact"] and good["catalogue_target"]
+    assert far["exact"] and not far["catalogue_target"]
+    ooc = score(CASES["ooc_outwash"], result())
+    scores = {"cases": [good, far, ooc], "summary": None}
+    scores["summary"] = summarise(scores["cases"], [case, case, CASES["ooc_outwash"]])
+    assert scores["summary"]["catalogue_target_rate"] == 0.5
+    assert scores["summary"]["uncatalogued"]["cases"] == 1
+    text = table(scores)
+    assert "located missing" in text and "out of the catalogue (1 cases)" in text
