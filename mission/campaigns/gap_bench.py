@@ -225,7 +225,7 @@ def _hard_cases(drag: list[float]) -> list[Case]:
             ),
             {
                 "ground_effect": {"rho": 2.0},
-                "rotor_drag": dict(zip(("kx", "ky", "kz"), drag, strict=True)),
+                "rotor_drag": {"kxy": drag[0], "kz": drag[2]},
                 "thrust_coefficient": {"scale": 1.05},
             },
             nominal=(),
