@@ -153,7 +153,7 @@ def fit(
     starts = [x0]
     offset = 0
     for c, part in zip(names, parts, strict=True):
-        if c in MULTI_START and c not in start and c not in problem.nominal:
+        if c in MULTI_START and c not in start:
             for v in MULTI_START[c]:
                 x = x0.copy()
                 x[offset] = np.clip(v / scale[offset], lo[offset], hi[offset])

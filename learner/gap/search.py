@@ -160,6 +160,12 @@ def forward_search(problem: Problem, candidates: list[str], folds: int) -> tuple
             break
         current, current_cv = accepted
         chosen = current.names
+        # the set refitted from fresh starts: a member fitted before a later one joined may
+        # sit in a local minimum the warm starts keep (a ground effect's rho walled off by its
+        # cut-off step)
+        fresh = fit(problem, chosen)
+        if fresh.bic < current.bic - 1e-6 and not any(set_problems(problem, fresh).values()):
+            current = fresh
     return current, trail
 
 

@@ -68,13 +68,22 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         not args.no_replay,
     )  # fmt: skip
     for effect, e in result["effects"].items():
+        params = ", ".join(f"{p} {v['value']:.4g}" for p, v in (e.get("parameters") or {}).items())
+        shown = f" ({params})" if params and e["status"] == "present" else ""
         why = f" ({e['why']})" if e["status"] in ("at bound", "implausible") else ""
-        print(f"{effect:20s} {e['status']}{why}")
+        print(f"{effect:20s} {e['status']}{shown}{why}")
     for note in result.get("notes") or []:
         print(f"note: {note}")
     f = result["gap"]["force_rms_n"]
     print(f"force gap {f['before'] * 1000:.2f} -> {f['after'] * 1000:.2f} mN "
           f"(shrink {f['shrink'] * 100:.0f}%); report: {args.out / 'report.md'}")  # fmt: skip
+    learned = result["gap"].get("force_rms_n_learned")
+    if learned:
+        print(f"with the learnt residual: {learned['after'] * 1000:.2f} mN (shrink "
+              f"{learned['shrink'] * 100:.0f}%)")  # fmt: skip
+    unexplained = result.get("unexplained") or {}
+    if unexplained.get("sentence"):
+        print(f"unexplained: {unexplained['sentence']}")
     return 0
 
 
