@@ -12,7 +12,7 @@ from scipy.optimize import least_squares
 
 from learner.gap.candidates import CANDIDATES, Candidate, Values, catalogue, world_force
 from learner.gap.flightdata import FlightData
-from learner.gap.residual import smooth_per_segment
+from learner.gap.residual import residual_n, smooth_per_segment
 from learner.gap.stats import wald_p
 from simbridge.vehicle import Vehicle
 
@@ -79,6 +79,14 @@ class Fit:
     p: int
     bic: float
     cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # of all parameters
+
+
+def problem_for(flights: list[FlightData], nominal: Values, vehicle: Vehicle) -> Problem:
+    """The flights' residuals against the nominal world, with their noise variance."""
+    res = [residual_n(d, nominal, vehicle) for d in flights]
+    problem = Problem(flights, res, nominal, vehicle)
+    problem.noise_var = noise_variance(res, flights)
+    return problem
 
 
 def noise_variance(residuals: list[np.ndarray], flights: list[FlightData]) -> float:

@@ -1,0 +1,285 @@
+"""The verdict on each catalogue effect: present (with its 95% CI, refitted on each flight),
+implausible, at bound, not identifiable (not excited, not a candidate, cancelling another or
+collinear with one; an alternative that could carry the effect only at an implausible value,
+or that fits worse and does not trade off against it, is ruled out by name) or absent; and
+whether a present effect is named with confidence."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from learner.gap import fit as gapfit
+from learner.gap.candidates import CANDIDATES, Values, implausible_parameters
+from learner.gap.flightdata import FlightData
+from simbridge.vehicle import Vehicle
+
+Z_CRIT = 1.959964
+ALTERNATIVE_BIC = 10.0  # a collinear alternative this much worse does not carry the effect
+TRADE_OFF = 0.95  # unless, fitted beside it, some parameters of the two correlate this much
+
+
+def effect_report(
+    problem: gapfit.Problem,
+    best: gapfit.Fit,
+    excitation: dict[str, float],
+    excited: list[str],
+    trail: list[dict] | None = None,
+    tried: list[str] | None = None,
+) -> dict[str, dict[str, Any]]:
+    """Each catalogue effect: present; implausible (the data want it, at a value outside its
+    physical range: the value and what it would mean), at bound (its fit ended on a bound of
+    the search), not identifiable (not excited, not a candidate for these logs, cancelling or
+    indistinguishable from another: the group is named); else absent. With 95% CIs."""
+    tried = list(CANDIDATES) if tried is None else tried
+    refused = _refused(trail or [])
+    sens = {c: gapfit.sensitivities(problem, c, {**best.values}) for c in excited if c in tried}
+    out: dict[str, dict[str, Any]] = {}
+    for name, cand in CANDIDATES.items():
+        entry: dict[str, Any] = {"candidate": name, "excitation_z": excitation[name]}
+        if name in best.values:
+            group = sorted(
+                other
+                for other in excited
+                if other != name
+                and other in sens
+                and name in sens
+                and max(
+                    gapfit.collinearity_r2(sens[name], sens[other]),
+                    gapfit.collinearity_r2(sens[other], sens[name]),
+                )
+                >= gapfit.COLLINEAR_R2
+            )
+            ruled_out = _alternatives_ruled_out(problem, best, name, group)
+            if ruled_out:
+                entry["alternatives_ruled_out"] = ruled_out
+                group = [g for g in group if g not in ruled_out]
+            v, se = best.values[name], best.stderr[name]
+            entry["parameters"] = {
+                p: {
+                    "value": float(v[i]),
+                    "ci95": [float(v[i] - Z_CRIT * se[i]), float(v[i] + Z_CRIT * se[i])],
+                    "unit": cand.units[i],
+                }
+                for i, p in enumerate(cand.params)
+            }
+            if len(cand.effects) > 1 or group:
+                entry["status"] = "not identifiable"
+                members = sorted(
+                    {*cand.effects, *(e for g in group for e in CANDIDATES[g].effects)}
+                )
+                entry["group"] = members
+                entry["why"] = "indistinguishable in the data: " + ", ".join(members)
+            else:
+                entry["status"] = "present"
+        elif name not in tried:
+            entry["status"] = "not identifiable"
+            entry["why"] = (
+                "not a candidate for these logs: it models the accelerometer, and the logs' "
+                "acceleration is differentiated from their velocity"
+            )
+            entry["group"] = list(cand.effects)
+        elif name in refused:
+            entry.update(_refusal(name, refused[name], problem))
+        elif name not in excited:
+            entry["status"] = "not identifiable"
+            entry["why"] = f"not excited by the flights (z = {excitation[name]:.1f})"
+            entry["group"] = list(cand.effects)
+        else:
+            entry["status"] = "absent"
+        for effect in cand.effects:
+            e = dict(entry)
+            if name == "thrust_mass" and "parameters" in entry:
+                c = entry["parameters"]["c"]
+                e["parameters"] = _thrust_mass_as(effect, c)
+            out[effect] = e
+    # an effect indistinguishable from a fitted one is not absent: it shares that one's group
+    for name in best.values:
+        for effect in CANDIDATES[name].effects:
+            entry = out[effect]
+            for other in entry.get("group", []):
+                o = out[other]
+                if o["status"] == "absent" or o.get("why", "").startswith("cancels"):
+                    out[other] = {
+                        **{k: v for k, v in o.items() if k != "parameters"},
+                        "status": "not identifiable",
+                        "group": entry["group"],
+                        "why": f"indistinguishable from {name}, which carries the fitted "
+                        "value: " + ", ".join(entry["group"]),
+                    }
+    return out
+
+
+def _alternatives_ruled_out(
+    problem: gapfit.Problem, best: gapfit.Fit, name: str, group: list[str]
+) -> dict[str, str]:
+    """Of the candidates the data cannot tell from `name`, those that could carry its share
+    only at a value outside their physical range or on a bound (a 3.6 m/s wind read as an
+    accelerometer bias of 1.3 m/s^2): physics tells them apart. Candidate -> why."""
+    out = {}
+    cat = problem.catalogue
+    for other in group:
+        if other in best.values:
+            continue
+        names = tuple(other if n == name else n for n in best.names)
+        alt = gapfit.fit(problem, names, max_nfev=60, start=best.values)
+        bad = implausible_parameters(other, alt.values[other], cat)
+        if bad:
+            h = bad[0]
+            out[other] = (
+                f"it would take {h['parameter']} {h['value']:.3g}, outside its physical range "
+                f"[{h['range'][0]:.3g}, {h['range'][1]:.3g}]"
+            )
+        elif gapfit.at_bound(other, alt.values[other], cat):
+            out[other] = "it would sit on a bound of the search"
+        # worse as a whole, it may still trade off against part of the effect (an
+        # accelerometer's z bias against a thrust scale, beside an x bias)
+        elif (
+            alt.bic - best.bic > ALTERNATIVE_BIC
+            and _trades_off(problem, best, name, other) < TRADE_OFF
+        ):
+            out[other] = (
+                f"swapped in for {name}, it fits the flights worse (BIC "
+                f"+{alt.bic - best.bic:.0f}), and beside it the two do not trade off"
+            )
+    return out
+
+
+def _trades_off(problem: gapfit.Problem, best: gapfit.Fit, name: str, other: str) -> float:
+    """The largest correlation between a parameter of `name` and one of `other` when both are
+    fitted beside the chosen set."""
+    f = gapfit.fit(problem, (*best.names, other), max_nfev=60, start=best.values)
+    sd = np.sqrt(np.maximum(np.diag(f.cov), 1e-300))
+    corr = f.cov / np.outer(sd, sd)
+    index, i = {}, 0
+    for n in f.names:
+        k = len(f.values[n])
+        index[n] = slice(i, i + k)
+        i += k
+    return float(np.max(np.abs(corr[index[name], index[other]])))
+
+
+def _refused(trail: list[dict]) -> dict[str, dict]:
+    """Candidates the data asked for (criterion down, significant) in a move refused as
+    unphysical, and not chosen later: the last such step of each."""
+    last: dict[str, dict] = {}
+    for step in trail:
+        if "added" not in step or step.get("selected") or not step.get("significant"):
+            continue
+        if step["implausible"] or step["at_bound"] or step["cancelling"]:
+            for name in [*step.get("with", []), step["added"]]:
+                last[name] = step
+    return last
+
+
+def _refusal(name: str, step: dict, problem: gapfit.Problem) -> dict[str, Any]:
+    """The report entry of a candidate refused as unphysical (`_refused`)."""
+    cand = CANDIDATES[name]
+    value = step["values"].get(name, step["value"])
+    params = {
+        p: {"value": v, "ci95": None, "unit": cand.units[i]}
+        for i, (p, v) in enumerate(zip(cand.params, value, strict=True))
+    }
+    pairs = [c for c in step["cancelling"] if name in c["members"]]
+    if pairs:
+        members = sorted({e for c in pairs for m in c["members"] for e in CANDIDATES[m].effects})
+        others = sorted({m for c in pairs for m in c["members"]} - {name})
+        return {
+            "status": "not identifiable",
+            "group": members,
+            "parameters": params,
+            "why": (
+                f"cancels {', '.join(others)}: their contributions oppose each other (cosine "
+                f"{pairs[0]['cosine']:.2f}, parameter correlation {pairs[0]['correlation']:.2f})"
+                ", so the data fix only their sum; not written into the corrected world"
+            ),
+        }
+    own = step["implausible"].get(name) or []
+    if own:
+        parts = [
+            f"{h['parameter']} {h['value']:.4g} outside its physical range "
+            f"[{h['range'][0]:.4g}, {h['range'][1]:.4g}]"
+            for h in own
+        ]
+        return {
+            "status": "implausible",
+            "implausible": own,
+            "parameters": params,
+            "why": "; ".join(parts) + f": it would mean {own[0]['meaning']}; not written "
+            "into the corrected world",
+        }
+    hits = step.get("at_bound_members", {}).get(name) or []
+    if hits:
+        return {"status": "at bound", "at_bound": hits, "parameters": params,
+                "why": bound_sentence(hits)}  # fmt: skip
+    # refused for another member's sake: what the data asked for is in that member's entry
+    blame = sorted(set(step["implausible"]) | set(step.get("at_bound_members", {})))
+    return {
+        "status": "absent",
+        "why": f"asked for only beside {', '.join(blame)}, which was refused as unphysical",
+    }
+
+
+def bound_sentence(hits: list[dict]) -> str:
+    """'rho reached its bound 25: the effect is stronger than the catalogue's range'."""
+    parts = [f"{h['parameter']} reached its bound {h['bound']:.4g}" for h in hits]
+    return (
+        ", ".join(parts) + ": the effect is stronger than the catalogue's range, or the fit "
+        "leans on it to make up for another; not added to the corrected world"
+    )
+
+
+def _thrust_mass_as(effect: str, c: dict[str, Any]) -> dict[str, Any]:
+    """c = s / k - 1 read as a C_T scale s (k = 1) or a mass scale k (s = 1); a fit on a
+    bound has no interval."""
+    lo, hi = c["ci95"] or (np.nan, np.nan)
+    if effect == "thrust_coefficient":
+        ci = None if c["ci95"] is None else [1.0 + lo, 1.0 + hi]
+        return {"scale": {"value": 1.0 + c["value"], "ci95": ci, "unit": "1"}}
+    ci = None if c["ci95"] is None else [1.0 / (1.0 + hi), 1.0 / (1.0 + lo)]
+    return {"scale": {"value": 1.0 / (1.0 + c["value"]), "ci95": ci, "unit": "1"}}
+
+
+def per_flight_values(
+    effects: dict[str, dict[str, Any]],
+    flights: list[FlightData],
+    nominal: Values,
+    vehicle: Vehicle,
+    best: gapfit.Fit,
+) -> None:
+    """The chosen set refitted on each flight alone (fitting and held out): whether a present
+    effect is the same on every flight (a wind's speed and direction within one condition).
+    A wind's direction is the one it blows towards, counterclockwise from world x (east)."""
+    if not best.names:
+        return
+    fits = [(d.name, gapfit.fit(gapfit.problem_for([d], nominal, vehicle), best.names,
+                                max_nfev=60, start=best.values)) for d in flights]  # fmt: skip
+    for name in best.names:
+        for effect in CANDIDATES[name].effects:
+            e = effects[effect]
+            if e["status"] != "present":
+                continue
+            rows = []
+            for flight, f in fits:
+                v = f.values[name]
+                row: dict[str, Any] = {"flight": flight, "values": [float(x) for x in v]}
+                if name == "wind":
+                    row["speed_m_s"] = float(np.hypot(v[0], v[1]))
+                    row["towards_deg"] = float(np.degrees(np.arctan2(v[1], v[0])) % 360.0)
+                rows.append(row)
+            e["per_flight"] = rows
+
+
+def mark_confidence(effects: dict[str, dict[str, Any]], unexplained: dict[str, Any]) -> None:
+    """An effect is named with confidence only when nothing systematic is left beside it:
+    otherwise it may stand in for an effect outside the catalogue."""
+    for e in effects.values():
+        if e["status"] != "present":
+            continue
+        e["confident"] = not unexplained["significant"]
+        if unexplained["significant"]:
+            e["confidence_note"] = (
+                f"the catalogue leaves {unexplained['share'] * 100:.0f}% of the gap, "
+                "systematic: this effect may stand in for one outside the catalogue"
+            )
