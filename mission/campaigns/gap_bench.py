@@ -187,14 +187,16 @@ def _cases() -> list[Case]:
             nominal=(GE, DRAG),
         )
     )
-    for kind in ("hover", "aggressive"):  # hovering does not excite a drag: not identifiable
+    # a hover's small motions (a 0.9 mN gap) still identify twice the default drag: since
+    # every candidate is tried, the case is scored as found (kxy within 5% in the bench of
+    # issue 16), no longer as "not excited" by the excitation probe's conservative z
+    for kind in ("hover", "aggressive"):
         c.append(
             Case(
                 f"rotor_drag_{kind}",
                 ({"name": "rotor_drag", "coefficient_n_s_m": kk},),
                 {"rotor_drag": {"kxy": kk[0], "kz": kk[2]}},
                 kind=kind,
-                unexcited=("rotor_drag",) if kind == "hover" else (),
             )
         )
     c += _hard_cases(kk)
