@@ -234,7 +234,7 @@ def _markdown(
         params = "; ".join(
             f"{p} {v['value']:.4g} ({v['ci95'][0]:.4g} to {v['ci95'][1]:.4g}) {v['unit']}"
             if v.get("ci95")
-            else f"{p} {v['value']:.4g} (on its bound) {v['unit']}"
+            else f"{p} {v['value']:.4g} {v['unit']} (refused: no interval)"
             for p, v in (e.get("parameters") or {}).items()
         )
         lines.append(f"| {effect} | {e['status']} | {params} | {e.get('why', '')} |")
