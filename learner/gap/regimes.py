@@ -202,13 +202,14 @@ def bonferroni_z(tests: int) -> float:
 
 def describe_range(variable: str, low: float, high: float) -> str:
     label, unit, _ = REGIMES[variable]
+    unit = "" if unit == "1" else f" {unit}"  # a ratio reads without a unit
     if variable == "saturated":
         return "with a rotor saturated" if low > 0 else "with no rotor saturated"
     if np.isinf(high):
-        return f"{label} above {low:g} {unit}"
+        return f"{label} above {low:g}{unit}"
     if np.isinf(low) or (low == 0 and variable != "vz_m_s"):
-        return f"{label} below {high:g} {unit}"
-    return f"{label} {low:g} to {high:g} {unit}"
+        return f"{label} below {high:g}{unit}"
+    return f"{label} {low:g} to {high:g}{unit}"
 
 
 def rules(table: list[RegimeBin], limit: int = 6) -> list[str]:
