@@ -121,3 +121,27 @@ def test_a_catalogue_effect_leaves_nothing_unexplained(tmp_path: Path, seed: int
     assert ge["status"] == "present" and ge["confident"]
     assert ge["parameters"]["rho"]["value"] == pytest.approx(3.0, rel=0.1)
     assert not result["unexplained"]["significant"]
+
+
+def test_a_thrust_scale_against_an_accelerometer_bias_is_a_cancelling_pair(tmp_path: Path) -> None:
+    """C_T x 0.6 against a 3.9 m/s^2 z bias: together they leave about nothing of either, the
+    pair is found cancelling, and both are outside their physical ranges."""
+    from learner.flightlogs.readers import read_log
+    from learner.gap.candidates import nominal_values
+    from learner.gap.fit import Fit, problem_for
+    from learner.gap.search import cancelling_pairs, set_problems
+
+    world = world_file(tmp_path / "world.yaml")
+    path = write_log(synthetic_log("f0", NANO, world, {}, 0, seconds=10.0), tmp_path / "f0.csv")
+    w = load_world(world)
+    d = prepare(read_log(path, None, NANO), w, NANO)
+    problem = problem_for([d], nominal_values(w.effects, NANO), NANO)
+    values = {"thrust_mass": np.array([-0.4]), "sensor_bias": np.array([0.0, 0.0, 3.9])}
+    cov = np.eye(4) * 1e-6
+    cov[0, 3] = cov[3, 0] = 0.99e-6  # the two trade off
+    fitted = Fit(("thrust_mass", "sensor_bias"), values, {}, 0.0, 1, 4, 0.0, cov)
+    pairs = cancelling_pairs(problem, fitted)
+    assert [p["members"] for p in pairs] == [["thrust_mass", "sensor_bias"]]
+    assert pairs[0]["cosine"] < -0.9
+    issues = set_problems(problem, fitted)
+    assert set(issues["implausible"]) == {"thrust_mass", "sensor_bias"}
