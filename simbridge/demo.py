@@ -44,7 +44,11 @@ def run_demo(world_name: str, logs: Path, say=print) -> None:
         f"{START_ALTITUDE_M * 100:.0f} cm, "
         f"rotors at the free-air hover speed {n:.1f} rad/s, rho_sim = {rho:g}"
     )
-    proc, port = start_sim(world_name, speedup="max", start=f"0,0,{START_ALTITUDE_M}")
+    # the clock waits for the first command: on a busy machine the first steps would
+    # otherwise run on the stand before it arrives, and the first row measure nothing
+    proc, port = start_sim(
+        world_name, speedup="max", start=f"0,0,{START_ALTITUDE_M}", lockstep_start=True
+    )
     sock = connect("127.0.0.1", port)
     command = constant(hover_fraction(n, vehicle.max_rotor_speed_rad_s))
     rows = []
