@@ -12,8 +12,6 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-import pybullet as pb
-
 from simbridge.effects.actuators import motor_lag_step
 from simbridge.effects.drag import body_drag_n, rotor_drag_n, wind_velocity_m_s
 from simbridge.effects.ground import ground_effect_force_n, thrust_gain
@@ -27,6 +25,7 @@ from simbridge.effects.uncatalogued import (
     thrust_decay_scale,
 )
 from simbridge.frames import Quat, Vec3, quat_from_euler, wxyz_to_xyzw, xyzw_to_wxyz
+from simbridge.pybullet_quiet import pybullet as pb
 from simbridge.rotors import Quad, rotor_forces_n, thrust_and_moments
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 from simbridge.world import World

@@ -35,6 +35,8 @@ def test_bench_sim_prints_its_figures_as_json():
 def test_demo_shows_the_ground_effect_lifting_the_drone(tmp_path):
     result = run_groundfx("demo", "--lift", "--logs", str(tmp_path))
     assert result.returncode == 0, result.stderr
+    # PyBullet's build banner is not our output (simbridge/pybullet_quiet.py)
+    assert "pybullet build time" not in result.stdout + result.stderr
     lines = result.stdout.splitlines()
     predicted = float(next(ln for ln in lines if "predicts" in ln).split("predicts")[1].split()[0])
     rows = [ln.split() for ln in lines if ln.strip()[:1].isdigit()]
