@@ -70,6 +70,9 @@ class CommanderParams:
     touchdown_s: float = param(
         0.1, unit="s", lo=0.0, hi=5.0, doc="down this long: touchdown, disarm"
     )
+    landing_floor_m: float = param(
+        0.05, unit="m", lo=0.0, hi=1.0, doc="the landing setpoint stops this far below resting"
+    )
     offboard_timeout_s: float = param(
         0.5, unit="s", lo=0.05, hi=60.0, doc="offboard setpoints older than this: hold"
     )
@@ -291,8 +294,10 @@ def command(
     height_m: float,
     resting_height_m: float,
     lead_s: float = 2.0,
+    ground_contact: bool = False,
 ) -> Command:
-    """One commander step at `time_s` from the vehicle's position and height above the surface."""
+    """One commander step at `time_s` from the vehicle's position and height above the surface;
+    `ground_contact`: the land detector's verdict (autopilot/land_detector.py)."""
     phase = state.phase
     if phase in (Phase.DISARMED, Phase.LANDED):
         return Command(state, None, False)
@@ -318,7 +323,9 @@ def command(
         events.append("taking off")
     reached: tuple[int, ...] = ground_reached
     if state.phase == Phase.LANDING:
-        return _land(state, params, time_s, position_m, height_m, resting_height_m, events)
+        return _land(
+            state, params, time_s, position_m, height_m, resting_height_m, events, ground_contact
+        )
     if state.mode == FlightMode.OFFBOARD:
         if time_s - state.offboard_s <= params.offboard_timeout_s and state.offboard is not None:
             phase = Phase.FLYING if state.phase != Phase.TAKING_OFF or position_m[2] > (
@@ -339,13 +346,22 @@ def command(
         state, flown = _fly_mission(state, params, time_s, position_m)
         reached += flown
         if state.phase == Phase.LANDING:
-            return _land(state, params, time_s, position_m, height_m, resting_height_m, events)
+            return _land(
+                state,
+                params,
+                time_s,
+                position_m,
+                height_m,
+                resting_height_m,
+                events,
+                ground_contact,
+            )
         if state.mission_done:
             events.append("mission complete")
     elif state.mode == FlightMode.LAND:
         return _land(
             start_landing(state, time_s, position_m),
-            params, time_s, position_m, height_m, resting_height_m, events,
+            params, time_s, position_m, height_m, resting_height_m, events, ground_contact,
         )  # fmt: skip
     elif state.mode == FlightMode.RETURN:
         home = state.home_m or position_m
@@ -355,7 +371,7 @@ def command(
         if state.reached_s is not None:
             return _land(
                 start_landing(state, time_s, position_m, state.target_m),
-                params, time_s, position_m, height_m, resting_height_m, events,
+                params, time_s, position_m, height_m, resting_height_m, events, ground_contact,
             )  # fmt: skip
     elif state.target_m is None:  # HOLD or TAKEOFF without a target: hold here
         state = go_to(state, position_m, position_m)
@@ -394,15 +410,24 @@ def _land(
     height_m: float,
     resting_height_m: float,
     events: list[str],
+    ground_contact: bool = False,
 ) -> Command:
-    """LANDING: a setpoint sinking at the landing speed until the vehicle is down."""
+    """LANDING: a setpoint sinking at the landing speed until the vehicle is down, never
+    further than `landing_floor_m` below where the vehicle would rest."""
     start = state.landing_from_m or position_m
     sink = params.land_speed_m_s
-    target = (start[0], start[1], start[2] - sink * (time_s - state.since_s))
-    setpoint = Setpoint(target, velocity_m_s=(0.0, 0.0, -sink), yaw_rad=math.radians(state.yaw_deg))
-    if height_m <= resting_height_m + params.touchdown_margin_m:
+    floor = position_m[2] - (height_m - resting_height_m) - params.landing_floor_m
+    z = start[2] - sink * (time_s - state.since_s)
+    sinking = z > floor
+    target = (start[0], start[1], max(z, floor))
+    setpoint = Setpoint(
+        target,
+        velocity_m_s=(0.0, 0.0, -sink if sinking else 0.0),
+        yaw_rad=math.radians(state.yaw_deg),
+    )
+    if height_m <= resting_height_m + params.touchdown_margin_m or ground_contact:
         down_since = state.down_since_s if state.down_since_s is not None else time_s
-        if time_s - down_since >= params.touchdown_s:
+        if time_s - down_since >= params.touchdown_s or ground_contact:
             reached: tuple[int, ...] = ()
             if state.mode == FlightMode.MISSION and state.plan and not state.mission_done:
                 reached = (state.current,)

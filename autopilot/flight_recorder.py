@@ -54,6 +54,8 @@ NAN3 = (math.nan,) * 3
 NAN4 = (math.nan,) * 4
 NAN2 = (math.nan,) * 2
 
+# the estimator's error against the simulator's truth, one series each
+ESTIMATOR_ERRORS = ("position_error_m", "velocity_error_m_s", "attitude_error_deg")
 GE_COLORS = {"true": (40, 180, 80), "predicted": (255, 140, 0)}
 ROTOR_COLORS = ((220, 60, 60), (60, 120, 220), (60, 180, 90), (230, 170, 40))
 
@@ -88,6 +90,8 @@ class FlightRecorder:
         self._events: list[tuple[float, str, str]] = []
         self._learner: list[tuple[float, float, float]] = []
         self._learner_lock = threading.Lock()  # the online learner reports from its thread
+        self._estimator: list[tuple[float, float, float, float]] = []
+        self._ratios: dict[str, list[tuple[float, float]]] = {}
         self._counters: dict[str, tuple[Callable[[], Sequence[int]], ColumnBatch]] = {}
         self._counters_t = -math.inf  # simulated time of the last counters sample
         self._next_flush_s = -math.inf
@@ -185,6 +189,22 @@ class FlightRecorder:
                 )
             )
 
+    def estimator(self, t_s: float, errors: Sequence[float], test_ratios: dict[str, float]) -> None:
+        """The estimator against the truth (autopilot.nav_metrics.estimation_error: position
+        x y z, velocity x y z, attitude angle) and the innovation test ratios of the
+        measurements fused at this step, by source."""
+        e = errors
+        self._estimator.append(
+            (
+                t_s,
+                math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]),
+                math.sqrt(e[3] * e[3] + e[4] * e[4] + e[5] * e[5]),
+                math.degrees(e[6]),
+            )
+        )
+        for source, ratio in test_ratios.items():
+            self._ratios.setdefault(source, []).append((t_s, ratio))
+
     def watch_counters(self, link: str, read: Callable[[], Sequence[int]]) -> None:
         """Record `read()` = (received, dropped, rejected) of a MAVLink link at every flush."""
         path = f"{MAVLINK}/{link}"
@@ -236,6 +256,16 @@ class FlightRecorder:
                 keep = ~np.isnan(a[:, col])
                 if keep.any():
                     self._scalars(path, a[keep, 0], a[keep, col])
+        if self._estimator:
+            a, self._estimator = np.asarray(self._estimator, dtype=float), []
+            for col, name in enumerate(ESTIMATOR_ERRORS, start=1):
+                self._scalars(f"plots/estimator/{name}", a[:, 0], a[:, col])
+        ratios, self._ratios = self._ratios, {}
+        for source, points in ratios.items():
+            a = np.asarray(points, dtype=float)
+            self._scalars(
+                f"plots/estimator/test_ratio/{source.replace(' ', '_')}", a[:, 0], a[:, 1]
+            )
         # once per simulated instant: a wall-clock flush and the closing one can fall on the
         # same step (a loaded machine), and the links' counters change only with a step
         if self._last_t > self._counters_t:

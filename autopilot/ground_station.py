@@ -46,6 +46,7 @@ class Failsafes:
     gcs_heard_wall_s: float = 0.0
     gcs_lost: bool = False
     fence_breached: bool = False
+    position_lost: bool = False
 
 
 @dataclass
@@ -55,6 +56,7 @@ class StepInput:
     state: FlightState
     height_m: float
     resting_height_m: float
+    position_lost: str | None = None  # the estimator's word: which position source went quiet
 
 
 @dataclass
@@ -468,6 +470,12 @@ class GroundStation:
             fs.gcs_lost = True
             if flying:
                 cmd = self._act(cmd, settings.gcs_loss_action, "ground station lost", inp)
+        if inp.position_lost is not None and not fs.position_lost:
+            fs.position_lost = True  # PX4: position loss in flight lands (COM_POSCTL_NAVL)
+            if flying:
+                cmd = self._act(cmd, ACTION_LAND, f"{inp.position_lost} in flight", inp)
+        elif inp.position_lost is None:
+            fs.position_lost = False
         home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
         p = inp.state.position_m
         fence = self.params.geofence()

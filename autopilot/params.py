@@ -21,7 +21,9 @@ import yaml
 
 from autopilot.commander import CommanderParams
 from autopilot.controller import ControllerParams
+from autopilot.land_detector import LandDetectorParams
 from autopilot.mission_items import Geofence
+from autopilot.navigation import EstimatorParams
 from simbridge.config import ConfigError, param
 
 # failsafe actions, PX4's numbering for NAV_DLL_ACT and GF_ACTION
@@ -89,11 +91,15 @@ GROUPS: dict[str, type] = {
     "fence": FenceParams,
     "model": ModelParams,
     "online": OnlineParams,
+    "estimator": EstimatorParams,
+    "land_detector": LandDetectorParams,
 }
 # MAVLink name -> (group, field)
 NAMES: dict[str, tuple[str, str]] = {
     "GFX_POS_P": ("controller", "position_p"),
     "GFX_POS_D": ("controller", "position_d"),
+    "GFX_POS_I": ("controller", "position_i"),
+    "GFX_POS_I_MAX": ("controller", "integral_limit_m_s2"),
     "GFX_ATT_P": ("controller", "attitude_p"),
     "GFX_ATT_D": ("controller", "attitude_d"),
     "GFX_YAW_P": ("controller", "yaw_p"),
@@ -128,6 +134,30 @@ NAMES: dict[str, tuple[str, str]] = {
     "GFX_OL_RLS_SC": ("online", "rls_scale_sd"),
     "GFX_OL_PAUSE": ("online", "pause"),
     "GFX_OL_RESET": ("online", "reset"),
+    "EKF2_EV_CTRL": ("estimator", "ev_ctrl"),
+    "EKF2_GPS_CTRL": ("estimator", "gps_ctrl"),
+    "EKF2_OF_CTRL": ("estimator", "of_ctrl"),
+    "EKF2_RNG_CTRL": ("estimator", "rng_ctrl"),
+    "EKF2_BARO_CTRL": ("estimator", "baro_ctrl"),
+    "EKF2_HGT_REF": ("estimator", "hgt_ref"),
+    "EKF2_MAG_DECL": ("estimator", "mag_decl_deg"),
+    "EKF2_EVP_NOISE": ("estimator", "ev_pos_noise_m"),
+    "EKF2_EVA_NOISE": ("estimator", "ev_att_noise_rad"),
+    "EKF2_RNG_NOISE": ("estimator", "rng_noise_m"),
+    "EKF2_RNG_SFE": ("estimator", "rng_noise_per_m"),
+    "EKF2_OF_N_MIN": ("estimator", "of_noise_rad_s"),
+    "EKF2_GPS_P_NOISE": ("estimator", "gps_pos_noise_m"),
+    "EKF2_GPS_V_NOISE": ("estimator", "gps_vel_noise_m_s"),
+    "EKF2_BARO_NOISE": ("estimator", "baro_noise_m"),
+    "EKF2_HEAD_NOISE": ("estimator", "mag_noise_rad"),
+    "EKF2_GATE": ("estimator", "gate_sd"),
+    "COM_POS_FS_DELAY": ("estimator", "source_timeout_s"),
+    "GFX_LND_ALT": ("land_detector", "max_height_m"),
+    "LNDMC_Z_VEL_MAX": ("land_detector", "max_climb_rate_m_s"),
+    "GFX_LND_LOW_T": ("land_detector", "low_thrust"),
+    "GFX_LND_SP_BELOW": ("land_detector", "min_setpoint_below_m"),
+    "LNDMC_TRIG_TIME": ("land_detector", "trigger_s"),
+    "GFX_LND_SP_FLOOR": ("commander", "landing_floor_m"),
 }
 
 
@@ -256,6 +286,12 @@ class ParamStore:
     def geofence(self) -> Geofence:
         fence = self.group("fence")
         return Geofence(fence.max_altitude_m, fence.max_radius_m)
+
+    def land_detector(self) -> LandDetectorParams:
+        return self.group("land_detector")
+
+    def estimator(self) -> EstimatorParams:
+        return self.group("estimator")
 
     def online(self) -> OnlineParams:
         return self.group("online")

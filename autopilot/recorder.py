@@ -49,6 +49,9 @@ class Recorder(Protocol):
     def learner(
         self, t_s: float, loss: float | None = None, version: int | None = None
     ) -> None: ...
+    def estimator(
+        self, t_s: float, errors: Sequence[float], test_ratios: dict[str, float]
+    ) -> None: ...
     def watch_counters(self, link: str, read: Callable[[], Sequence[int]]) -> None: ...
     def mission(
         self, plan: Sequence[PlanStep], start_m: Vec3, home_m: Vec3 | None, t_s: float
@@ -67,6 +70,9 @@ class NullRecorder:
         pass
 
     def learner(self, t_s: float, loss: float | None = None, version: int | None = None) -> None:
+        pass
+
+    def estimator(self, t_s: float, errors: Sequence[float], test_ratios: dict[str, float]) -> None:
         pass
 
     def watch_counters(self, link: str, read: Callable[[], Sequence[int]]) -> None:

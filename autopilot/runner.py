@@ -20,13 +20,16 @@ import numpy as np
 
 from autopilot import requests
 from autopilot.commander import CommanderState, Phase, command
-from autopilot.controller import FlightState, control
+from autopilot.controller import FlightState, control, integrate
 from autopilot.gcs_link import GcsLink
 from autopilot.ground_models import GroundEffectInputs, GroundEffectModel, make_model
 from autopilot.ground_station import GroundStation, StepInput
+from autopilot.land_detector import LandDetector, ground_contact
 from autopilot.metrics import COLUMNS, flight_metrics, ge_error_metrics, trajectory_sha256
 from autopilot.mission_items import MissionItem
 from autopilot.modes import FlightMode
+from autopilot.nav_metrics import estimation_error, estimator_metrics
+from autopilot.navigation import Navigation
 from autopilot.online_control import OnlineControl, OnlineOptions
 from autopilot.params import ParamStore
 from autopilot.record_options import RecordOptions
@@ -48,6 +51,7 @@ from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
 MODES = [p.value for p in Phase]
 AUTO_ARM_AFTER_S = 0.2  # --auto-start: arm once the sensors have been healthy this long
+INTEGRATE_ABOVE_M = 0.005  # the integral runs only this far above resting (not on the ground)
 
 
 @dataclass(frozen=True)
@@ -71,7 +75,8 @@ class AutopilotConfig:
     record_hz: float = 0.0  # > 0: record learning samples at this rate (thesis: 100 Hz)
     stop_after_samples: int | None = None  # end the flight once this many are recorded
     on_sample: Callable[[int], None] | None = None  # told the count of recorded samples
-    # told each airborne step (t, messages, state, rotor speeds applied over the last period)
+    # told each airborne step (t, messages, the true state as a lab's motion capture would log
+    # it, rotor speeds applied over the last period): the --flight-log of the gap diagnosis
     on_step: Callable[[float, Step, FlightState, Quad], None] | None = None
     online: OnlineOptions = OnlineOptions()  # online learning (GFX_OL_METHOD turns it on)
     record: RecordOptions | None = None  # the flight's rerun recording; None: off
@@ -85,44 +90,26 @@ class Flight:
     samples: np.ndarray | None = None  # learning samples, columns learner.dataset.COLUMNS
 
 
-def flight_state(step: Step, origin: tuple[float, float, float]) -> FlightState:
-    """Ground truth from HIL_STATE_QUATERNION in the local frame (x east, y north, z up)."""
+def true_state(step: Step, origin: tuple[float, float, float]) -> FlightState | None:
+    """Ground truth from HIL_STATE_QUATERNION in the local frame (x east, y north, z up):
+    for the flight log, the recording and the estimator's error, never for control."""
+    if "HIL_STATE_QUATERNION" not in step.latest:
+        return None
     s = step.latest["HIL_STATE_QUATERNION"]
-    east, north = geodetic_to_local(origin[0], origin[1], s["lat"] * 1e-7, s["lon"] * 1e-7)
+    local = step.latest.get("LOCAL_POSITION_NED") if "LOCAL_POSITION_NED" in step.new else None
+    if local is not None:  # the same truth in floats
+        position = ned_to_enu((local["x"], local["y"], local["z"]))
+        velocity = ned_to_enu((local["vx"], local["vy"], local["vz"]))
+    else:
+        east, north = geodetic_to_local(origin[0], origin[1], s["lat"] * 1e-7, s["lon"] * 1e-7)
+        position = (east, north, s["alt"] * 1e-3 - origin[2])
+        velocity = ned_to_enu((s["vx"] * 0.01, s["vy"] * 0.01, s["vz"] * 0.01))
     return FlightState(
-        position_m=(east, north, s["alt"] * 1e-3 - origin[2]),
-        velocity_m_s=ned_to_enu((s["vx"] * 0.01, s["vy"] * 0.01, s["vz"] * 0.01)),
+        position_m=position,
+        velocity_m_s=velocity,
         quaternion=quat_ned_frd_to_enu_flu(tuple(s["attitude_quaternion"])),
         angular_velocity_body_rad_s=frd_to_flu((s["rollspeed"], s["pitchspeed"], s["yawspeed"])),
     )
-
-
-def range_reading_m(step: Step) -> float | None:
-    """The newest downward range: the flow deck's float metres, else DISTANCE_SENSOR's cm."""
-    if "HIL_OPTICAL_FLOW" in step.new and step.latest["HIL_OPTICAL_FLOW"]["distance"] >= 0.0:
-        return float(step.latest["HIL_OPTICAL_FLOW"]["distance"])
-    if "DISTANCE_SENSOR" in step.new:
-        d = step.latest["DISTANCE_SENSOR"]
-        if d["min_distance"] <= d["current_distance"] <= d["max_distance"]:
-            return d["current_distance"] * 0.01
-    return None
-
-
-def estimate_height(
-    previous: float | None, reading_m: float | None, state: FlightState, dt_s: float
-) -> float:
-    """Height of the centre of mass above the surface below.
-
-    A range reading (along body -z) resets it; between readings it follows the vertical
-    velocity. Differencing the altitude instead would carry its 1 mm quantisation, which
-    near the cut-off moves a rho = 2 ground-effect estimate by tens of millinewtons.
-    Without a range sensor it is the altitude.
-    """
-    if reading_m is not None:
-        return reading_m * quat_to_matrix(state.quaternion)[8]
-    if previous is None:
-        return state.position_m[2]
-    return previous + state.velocity_m_s[2] * dt_s
 
 
 RECORDED_PHASES = (Phase.TAKING_OFF, Phase.FLYING, Phase.HOLDING, Phase.LANDING)
@@ -132,7 +119,13 @@ AIRBORNE_MARGIN_M = 0.002
 
 
 def learning_sample(
-    t: float, step: Step, state: FlightState, height: float, applied_rad_s: Quad, vehicle: Vehicle
+    t: float,
+    step: Step,
+    state: FlightState,
+    height: float,
+    applied_rad_s: Quad,
+    vehicle: Vehicle,
+    accel_bias_m_s2: Vec3 = (0.0, 0.0, 0.0),
 ) -> tuple[float, ...]:
     """One row of a learning dataset (learner.dataset.COLUMNS), from this step's messages.
 
@@ -142,8 +135,9 @@ def learning_sample(
     """
     m = quat_to_matrix(state.quaternion)
     sensor = step.sensor
-    f_body = frd_to_flu((sensor["xacc"], sensor["yacc"], sensor["zacc"]))
-    a = rotate(m, f_body)
+    f = frd_to_flu((sensor["xacc"], sensor["yacc"], sensor["zacc"]))
+    b = accel_bias_m_s2  # the estimator's: a real vehicle's corrected accelerometer
+    a = rotate(m, (f[0] - b[0], f[1] - b[1], f[2] - b[2]))
     a = (a[0], a[1], a[2] - GRAVITY_M_S2)
     thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in applied_rad_s)
     mass = vehicle.mass_kg
@@ -195,6 +189,7 @@ class Tuning:
         self.values = dict(store.values)
         self.controller = store.controller()
         self.commander = store.commander()
+        self.land_detector = store.land_detector()
         gains = self.controller
         # the speed limits' lead: steady speed = error * a0 / a1 (commander.limited_setpoint)
         self.lead_s = gains.position_d / gains.position_p if gains.position_p > 0 else 2.0
@@ -231,8 +226,13 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     ge_pairs: list[tuple[float, float, float]] = []  # (height, predicted, true) vertical GE
     speeds = (0.0, 0.0, 0.0, 0.0)
     ge = (0.0, 0.0, 0.0)
-    height: float | None = None
+    nav = Navigation(config.params.estimator(), config.origin, resting_height)
+    nav_errors: list[tuple[float, ...]] = []
+    integral = (0.0, 0.0, 0.0)  # the position loop's integral term, m/s^2
+    detector = LandDetector()
     last_t = 0.0
+    last_setpoint_z = 0.0
+    output = None
     cmd_state = CommanderState()
     ended = "landed"
     samples: list[tuple[float, ...]] = []
@@ -252,8 +252,12 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     online.wait_ready()
     user_on_event = config.on_event or (lambda t, text: None)
 
+    failsafes: list[str] = []  # for the summary
+
     def on_event(t: float, text: str) -> None:
         user_on_event(t, text)
+        if text.startswith("failsafe"):
+            failsafes.append(f"{text} at {t:.2f} s")
         recorder.event(text, "WARN" if text.startswith("failsafe") else "INFO", t)
 
     gcs = GcsLink(list(config.gcs_urls), config.signing)
@@ -277,11 +281,17 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             step = link.receive_step()
             t_us = step.sensor["time_usec"]
             t = t_us * 1e-6
-            state = flight_state(step, config.origin)
-            height = estimate_height(height, range_reading_m(step), state, t - last_t)
-            last_t = t
+            nav.update(step)
+            if not nav.ready:  # aligning: the first pose or fix has not come yet
+                link.send(t_us, (0.0, 0.0, 0.0, 0.0), channels, False)
+                continue
+            if cmd_state.phase in (Phase.DISARMED, Phase.ARMED, Phase.LANDED):
+                nav.resting()
+            state = nav.state()
+            height = nav.height_m()
+            actual = true_state(step, config.origin) or state
             wall = time.monotonic()
-            inp = StepInput(t, wall, state, height, resting_height)
+            inp = StepInput(t, wall, state, height, resting_height, nav.position_lost(t))
             if not rows and config.mission:
                 cmd_state = station.load_mission(cmd_state, config.mission)
             cmd_state = station.before_step(cmd_state, inp)
@@ -298,6 +308,26 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 )
             if tuning.refresh():
                 online.refresh(tuning.model, t)
+                nav.params = config.params.estimator()
+            below = (
+                state.position_m[2] - last_setpoint_z if cmd_state.phase == Phase.LANDING else 0.0
+            )
+            # the lift the controller demands of rotors and ground effect together, over the
+            # weight: below 1 it pushes down (a vehicle that does not follow is held up)
+            thrust_fraction = (
+                1.0 + output.commanded_acceleration_m_s2[2] / GRAVITY_M_S2
+                if output is not None
+                else 0.0
+            )
+            contact = ground_contact(
+                height,
+                resting_height,
+                state.velocity_m_s[2],
+                below,
+                thrust_fraction,
+                tuning.land_detector,
+            )
+            detector = detector.step(t, contact, tuning.land_detector)
             cmd = command(
                 cmd_state,
                 tuning.commander,
@@ -306,11 +336,12 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 height,
                 resting_height,
                 tuning.lead_s,
+                detector.landed(t, tuning.land_detector),
             )
             cmd_state = cmd.state
             airborne = height > resting_height + AIRBORNE_MARGIN_M
             if config.on_step is not None and airborne and cmd_state.phase in RECORDED_PHASES:
-                config.on_step(t, step, state, speeds)
+                config.on_step(t, step, actual, speeds)
             sample_hz = config.record_hz or online.sample_hz
             if (
                 sample_hz > 0.0
@@ -318,7 +349,9 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 and airborne
                 and cmd_state.phase in RECORDED_PHASES
             ):
-                row = learning_sample(t, step, state, height, speeds, vehicle)
+                row = learning_sample(
+                    t, step, state, height, speeds, vehicle, nav.accel_bias_m_s2()
+                )
                 online.submit(row)
                 if config.record_hz > 0.0:
                     samples.append(row)
@@ -341,26 +374,82 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 )
                 rotor_thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in speeds)
                 ge = fixed_point_step(ge, target, rotor_thrust)
-                output = control(state, cmd.setpoint, ge, vehicle, tuning.controller)
+                output = control(state, cmd.setpoint, ge, vehicle, tuning.controller, integral)
                 speeds = output.rotor_speeds_rad_s
+                # anti-windup: not on the ground (but while taking off: a vehicle heavier than
+                # its file must wind the integral up to leave it), in contact or saturated;
+                # while landing, horizontally only
+                frozen = (
+                    cmd_state.phase not in RECORDED_PHASES
+                    or (
+                        cmd_state.phase != Phase.TAKING_OFF
+                        and height < resting_height + INTEGRATE_ABOVE_M
+                    )
+                    or contact
+                    or output.saturated
+                )
+                integral = integrate(
+                    integral,
+                    output.pd_acceleration_m_s2,
+                    t - last_t,
+                    tuning.controller,
+                    frozen,
+                    frozen_vertical=cmd_state.phase == Phase.LANDING,
+                )
+                last_setpoint_z = cmd.setpoint.position_m[2]
                 timings.append(time.perf_counter() - t0)
                 truth = step.latest.get("DEBUG_VECT")
                 if airborne and truth is not None:
                     ge_pairs.append((height, target[2], truth["z"]))
             else:
                 speeds, ge, output = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), None
+                integral = (0.0, 0.0, 0.0)  # rotors off: the next flight starts afresh
+            last_t = t
             link.send(t_us, tuple(n / n_max for n in speeds), channels, cmd.armed)
             station.after_step(cmd_state, inp, cmd.reached, cmd.events)
             if cmd_state.plan is not drawn_plan:
                 drawn_plan = cmd_state.plan
                 recorder.mission(cmd_state.plan, state.position_m, cmd_state.home_m, t)
-            recorder.step(
-                t, step, state, height, cmd_state.phase, cmd.armed, cmd.setpoint, ge, speeds, output
+            if airborne and cmd_state.phase in RECORDED_PHASES:
+                nav_errors.append(estimation_error(state, actual))
+            recorder.estimator(t, estimation_error(state, actual), nav.quality.this_step)
+            # the log and the recording are for evaluation: the truth, and the true height
+            # above the surface (without the simulator's ALTITUDE: over the terrain found)
+            true_height = (
+                step.latest["ALTITUDE"]["bottom_clearance"]
+                if "ALTITUDE" in step.latest
+                else actual.position_m[2] - nav.terrain_m
             )
+            recorder.step(
+                t,
+                step,
+                actual,
+                true_height,
+                cmd_state.phase,
+                cmd.armed,
+                cmd.setpoint,
+                ge,
+                speeds,
+                output,
+            )
+            for text in nav.events:  # after the step: the recording opens with the mode
+                on_event(t, text)
+            nav.events.clear()
             zd = cmd.setpoint.position_m[2] if cmd.setpoint is not None else math.nan
-            p, v = state.position_m, state.velocity_m_s
+            p, v = actual.position_m, actual.velocity_m_s
             rows.append(
-                (t, p[0], p[1], p[2], v[0], v[1], v[2], zd, height, MODES.index(cmd_state.phase))
+                (
+                    t,
+                    p[0],
+                    p[1],
+                    p[2],
+                    v[0],
+                    v[1],
+                    v[2],
+                    zd,
+                    true_height,
+                    MODES.index(cmd_state.phase),
+                )
             )
             if (
                 config.exit_after_landing
@@ -397,6 +486,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             steps=len(log),
             trajectory_sha256=trajectory_sha256(log),
         )
+    summary.update(estimator_metrics(np.asarray(nav_errors).reshape(-1, 7), nav))
     summary.update(ge_error_metrics(np.asarray(ge_pairs, dtype=float).reshape(-1, 3)))
     if timings:
         us = np.asarray(timings) * 1e6
@@ -410,6 +500,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         unknown=link.unknown,
         gcs=gcs.counters.as_dict(),
         mission_items=len(station.items),
+        touchdown_declared_s=cmd_state.touchdown_s,
+        failsafes=failsafes,
         **online_summary,
     )
     summary.update(recorder.stats())

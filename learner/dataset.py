@@ -18,7 +18,12 @@ import numpy as np
 from learner.npzfile import read_npz
 from simbridge.config import ConfigError
 
-OUTLIER_RANGE_N = (-1e-3, 1.0)  # thesis 3.5.2: samples with f_ge,z outside are dropped
+# Thesis 3.5.2 drops samples with f_ge,z outside [-1e-3, 1] N. Its targets were noise-free;
+# ours come from a real accelerometer's readings (1.5 mN of white noise per sample, more in
+# flight), and cutting at -1 mN would drop the lower tail of that noise far from the ground
+# and bias the network upwards there. The lower bound is therefore at -20 mN (13 standard
+# deviations of the noise): it still drops what no ground effect can be.
+OUTLIER_RANGE_N = (-0.02, 1.0)
 
 
 def inliers(x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -65,6 +65,7 @@ def fly(
     record: bool | Path = True,
     max_flight_s: float | None = None,
     autopilot_options: Sequence[str] = (),
+    sim_options: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line.
 
@@ -97,7 +98,11 @@ def fly(
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
     sim, port = start_sim(
-        resolve_world_path(world), speedup=speedup, start=start, lockstep_start=True
+        resolve_world_path(world),
+        speedup=speedup,
+        start=start,
+        lockstep_start=True,
+        extra=list(sim_options),
     )
     gcs: dict[str, Any] = {}
     try:

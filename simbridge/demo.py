@@ -47,7 +47,11 @@ def run_demo(world_name: str, logs: Path, say=print) -> None:
     # the clock waits for the first command: on a busy machine the first steps would
     # otherwise run on the stand before it arrives, and the first row measure nothing
     proc, port = start_sim(
-        world_name, speedup="max", start=f"0,0,{START_ALTITUDE_M}", lockstep_start=True
+        world_name,
+        speedup="max",
+        start=f"0,0,{START_ALTITUDE_M}",
+        lockstep_start=True,
+        extra=["--ideal-sensors"],  # the physics shown as it is, not through a noisy IMU
     )
     sock = connect("127.0.0.1", port)
     command = constant(hover_fraction(n, vehicle.max_rotor_speed_rad_s))

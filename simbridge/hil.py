@@ -5,8 +5,10 @@ motion-capture pose, float precision), DISTANCE_SENSOR (downward range, whole cm
 HIL_OPTICAL_FLOW (a flow deck: flow and the same range in float metres) and
 ESC_TELEMETRY_1_TO_4 (actual rotor speeds, so motor lag is observable) at their world-file
 rates; HIL_GPS at 10 Hz; HIL_SENSOR always last. Autopilot -> simulator:
-HIL_ACTUATOR_CONTROLS. Units and frames (NED, FRD, degE7, mm, cm/s, mG, gauss, hPa) exist
-only here and in `frames`.
+HIL_ACTUATOR_CONTROLS. With the true ground effect (DEBUG_VECT GE_TRUE) go the true
+position in floats (LOCAL_POSITION_NED) and the true height above the surface below
+(ALTITUDE's bottom_clearance), all for evaluation only. Units and frames (NED,
+FRD, degE7, mm, cm/s, mG, gauss, hPa) exist only here and in `frames`.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from simbridge.frames import (
     rotate_transposed,
 )
 from simbridge.physics import EffectForces, VehicleState
+from simbridge.sensor_noise import SensorErrors
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 from simbridge.wire import PacketSequence, WirePacker
 from simbridge.world import World
@@ -105,6 +108,8 @@ class HilEncoder:
         self._pack_gps = packer(mavlink.MAVLink_hil_gps_message)
         self._pack_flow = packer(mavlink.MAVLink_hil_optical_flow_message)
         self._pack_debug = packer(mavlink.MAVLink_debug_vect_message)
+        self._pack_local = packer(mavlink.MAVLink_local_position_ned_message)
+        self._pack_altitude = packer(mavlink.MAVLink_altitude_message)
         fx = world.effects
         period = world.control_period_s
         self._imu_delay = (
@@ -113,8 +118,12 @@ class HilEncoder:
         self._state_delay = (
             delay_steps(fx.sensor_latency.state_delay_s, period) if fx.sensor_latency else 0
         )
+        noise = world.sensor_noise
+        self._errors = SensorErrors(noise, period)
+        # the motion-capture pose comes later than the state (the capture system's latency)
+        self._mocap_delay = self._state_delay + delay_steps(noise.mocap_latency_s, period)
         self._history: deque[VehicleState] = deque(
-            maxlen=max(self._imu_delay, self._state_delay) + 1
+            maxlen=max(self._imu_delay, self._mocap_delay) + 1
         )
         bias = fx.sensor_bias
         zero = (0.0, 0.0, 0.0)
@@ -131,6 +140,7 @@ class HilEncoder:
             "truth": world.every_steps(rates.truth_hz),
         }
         self._steps = 0
+        self._period_us = world.control_period_us
 
     def _due(self, name: str) -> bool:
         k = self._every[name]
@@ -147,11 +157,14 @@ class HilEncoder:
         imu = hist[max(0, len(hist) - 1 - self._imu_delay)]
         nav = hist[max(0, len(hist) - 1 - self._state_delay)]
         parts = [self._hil_state(nav, time_us)]
-        if self._due("odometry"):
-            parts.append(self._odometry(nav, time_us))
+        until_s = self.world.sensors.odometry_until_s
+        if self._due("odometry") and (until_s is None or time_us < until_s * 1e6):
+            mocap = hist[max(0, len(hist) - 1 - self._mocap_delay)]
+            parts.append(self._odometry(mocap, time_us))
         if self._due("distance"):
-            parts.append(self._distance(nav, time_us))
-            parts.append(self._flow(nav, time_us))
+            range_m = self._errors.range_m(nav.range_m)
+            parts.append(self._distance(range_m, time_us))
+            parts.append(self._flow(nav, range_m, time_us))
         if self._due("esc"):
             parts.append(self._esc(state))
         if self._due("gps"):
@@ -159,6 +172,19 @@ class HilEncoder:
         if truth is not None and self._due("truth"):
             ge = truth.ground_effect_n
             parts.append(self._pack_debug.pack(TRUTH_NAME, time_us, ge[0], ge[1], ge[2]))
+            # the true position and velocity in floats (HIL_STATE_QUATERNION's degE7 resolve
+            # 11 mm): for evaluating the autopilot's estimator, never for control
+            x, y, z = enu_to_ned(nav.position_m)
+            vx, vy, vz = enu_to_ned(nav.velocity_m_s)
+            parts.append(self._pack_local.pack(time_us // 1000, x, y, z, vx, vy, vz))
+            # ... and the true height of the centre of mass above the surface below it
+            # (bottom_clearance), by which landings and holds are judged
+            up = quat_to_matrix(nav.quaternion)[8]
+            clearance = nav.range_m * up if math.isfinite(nav.range_m) else nav.position_m[2]
+            parts.append(self._pack_altitude.pack(
+                time_us, nav.position_m[2], nav.position_m[2] + self.world.origin.alt_m,
+                nav.position_m[2], nav.position_m[2], -1000.0, clearance,
+            ))  # fmt: skip
         # HIL_SENSOR last: it is the tick a lockstep autopilot answers, so everything of this
         # step has arrived when it does.
         parts.append(self._hil_sensor(imu, time_us))
@@ -176,10 +202,17 @@ class HilEncoder:
         specific_force = add(
             rotate_transposed(m, (a[0], a[1], a[2] + GRAVITY_M_S2)), self._accel_bias
         )
+        errors = self._errors
+        specific_force, rates = errors.imu(
+            specific_force, add(s.angular_velocity_body_rad_s, self._gyro_bias)
+        )
         acc = flu_to_frd(specific_force)
-        gyro = flu_to_frd(add(s.angular_velocity_body_rad_s, self._gyro_bias))
-        mag = flu_to_frd(rotate_transposed(m, self._mag_enu))
+        gyro = flu_to_frd(rates)
+        mag = flu_to_frd(
+            errors.vector(rotate_transposed(m, self._mag_enu), errors.noise.mag_noise_gauss)
+        )
         alt = self._amsl_m(s.position_m[2] + self._position_bias[2])
+        pressure = errors.scalar(pressure_hpa(alt), errors.noise.baro_noise_hpa)
         return self._pack_hil_sensor.pack(
             time_us,
             acc[0],
@@ -191,7 +224,7 @@ class HilEncoder:
             mag[0],
             mag[1],
             mag[2],
-            pressure_hpa(alt),
+            pressure,
             0.0,
             alt,
             15.0 - 0.0065 * alt,
@@ -238,17 +271,25 @@ class HilEncoder:
         )
 
     def _odometry(self, s: VehicleState, time_us: int) -> bytes:
-        p = enu_to_ned(self._position(s))
-        v_body = flu_to_frd(rotate_transposed(quat_to_matrix(s.quaternion), s.velocity_m_s))
-        rates = flu_to_frd(s.angular_velocity_body_rad_s)
+        """A motion-capture pose, stamped with its capture time (it arrives `mocap_latency_s`
+        late). Velocities are NaN (not measured) unless the sensors are ideal."""
+        errors = self._errors
+        p = enu_to_ned(errors.vector(self._position(s), errors.noise.mocap_position_m))
+        q = quat_enu_flu_to_ned_frd(errors.attitude(s.quaternion))
+        if errors.ideal:
+            v_body = flu_to_frd(rotate_transposed(quat_to_matrix(s.quaternion), s.velocity_m_s))
+            rates = flu_to_frd(s.angular_velocity_body_rad_s)
+        else:
+            v_body = rates = (math.nan, math.nan, math.nan)
+        captured_us = time_us - (self._mocap_delay - self._state_delay) * self._period_us
         return self._pack_odometry.pack(
-            time_us,
+            max(0, captured_us),
             mavlink.MAV_FRAME_LOCAL_NED,
             mavlink.MAV_FRAME_BODY_FRD,
             p[0],
             p[1],
             p[2],
-            list(quat_enu_flu_to_ned_frd(s.quaternion)),
+            list(q),
             v_body[0],
             v_body[1],
             v_body[2],
@@ -262,10 +303,10 @@ class HilEncoder:
             100,
         )
 
-    def _distance(self, s: VehicleState, time_us: int) -> bytes:
+    def _distance(self, range_m: float, time_us: int) -> bytes:
         max_cm = round(self.vehicle.range_sensor_max_m * 100.0)
         # MAVLink: max_distance + 1 means nothing in range.
-        current = max_cm + 1 if s.range_m == math.inf else min(max_cm, round(s.range_m * 100.0))
+        current = max_cm + 1 if range_m == math.inf else min(max_cm, round(range_m * 100.0))
         return self._pack_distance.pack(
             time_us // 1000,
             1,
@@ -281,7 +322,7 @@ class HilEncoder:
             0,
         )
 
-    def _flow(self, s: VehicleState, time_us: int) -> bytes:
+    def _flow(self, s: VehicleState, range_m: float, time_us: int) -> bytes:
         """A downward flow-and-range deck (Crazyflie flow deck): the range in float metres.
 
         Flow is integrated over the message interval from the current rates and velocity
@@ -292,8 +333,10 @@ class HilEncoder:
         v = flu_to_frd(rotate_transposed(quat_to_matrix(s.quaternion), s.velocity_m_s))
         h = s.range_m
         known = math.isfinite(h) and h > 0.0
-        flow_x = (rates[0] - v[1] / h) * dt if known else 0.0
-        flow_y = (rates[1] + v[0] / h) * dt if known else 0.0
+        flow_sd = self._errors.noise.flow_noise_rad
+        flow_x = self._errors.scalar((rates[0] - v[1] / h) * dt, flow_sd) if known else 0.0
+        flow_y = self._errors.scalar((rates[1] + v[0] / h) * dt, flow_sd) if known else 0.0
+        h = range_m
         return self._pack_flow.pack(
             time_us,
             0,
@@ -315,8 +358,15 @@ class HilEncoder:
         return self._pack_esc.pack([0] * 4, [0] * 4, [0] * 4, [0] * 4, rpm, [count] * 4)
 
     def _gps(self, s: VehicleState, time_us: int) -> bytes:
-        lat, lon, alt = self._geodetic(s)
-        vn, ve, vd = enu_to_ned(s.velocity_m_s)
+        n, errors = self._errors.noise, self._errors
+        x, y, z = self._position(s)
+        x = errors.scalar(x, n.gps_horizontal_m)
+        y = errors.scalar(y, n.gps_horizontal_m)
+        z = errors.scalar(z, n.gps_vertical_m)
+        o = self.world.origin
+        lat_deg, lon_deg = local_to_geodetic(o.lat_deg, o.lon_deg, x, y)
+        lat, lon, alt = round(lat_deg * 1e7), round(lon_deg * 1e7), round(self._amsl_m(z) * 1e3)
+        vn, ve, vd = enu_to_ned(errors.vector(s.velocity_m_s, n.gps_velocity_m_s))
         ground = math.hypot(vn, ve)
         cog = (
             round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0) % 36000

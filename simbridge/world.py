@@ -13,6 +13,7 @@ from typing import Any
 
 from simbridge.config import ConfigError, build, load_yaml, param, resolve_packaged
 from simbridge.effects import EffectSet, parse_effects
+from simbridge.sensor_noise import SensorNoise
 
 WORLDS_DIR = Path(__file__).parent / "worlds"
 Vec3 = tuple[float, float, float]
@@ -117,10 +118,21 @@ class SensorRates:
 
     gps_hz: float = param(10.0, unit="Hz", lo=0.0, hi=1000.0, doc="HIL_GPS; 0 disables")
     odometry_hz: float = param(
-        0.0, unit="Hz", lo=0.0, hi=1000.0, doc="ODOMETRY, a motion-capture pose in floats; 0: off"
+        100.0,
+        unit="Hz",
+        lo=0.0,
+        hi=1000.0,
+        doc="ODOMETRY, a motion-capture pose in floats (a mocap system at 100 Hz); 0: off",
     )
     distance_sensor_hz: float = param(
         50.0, unit="Hz", lo=0.0, hi=1000.0, doc="DISTANCE_SENSOR (a VL53L1x ranges at 50 Hz)"
+    )
+    odometry_until_s: float | None = param(
+        None,
+        unit="s",
+        lo=0.0,
+        hi=1e6,
+        doc="motion capture stops at this simulated time (tracking lost); null: never",
     )
     esc_hz: float = param(125.0, unit="Hz", lo=0.0, hi=1000.0, doc="ESC_TELEMETRY_1_TO_4")
     truth_hz: float = param(
@@ -147,6 +159,9 @@ class World:
     )
     obstacles: tuple[Box, ...] = ()
     sensors: SensorRates = param(SensorRates(), doc="HIL message rates")
+    sensor_noise: SensorNoise = param(
+        SensorNoise(), doc="sensor errors (simbridge/sensor_noise.py gives the sources)"
+    )
     effects: EffectSet = EffectSet()
 
     def __post_init__(self) -> None:
@@ -243,3 +258,8 @@ def parse_start(text: str) -> tuple[float, float, float]:
 def with_start(world: World, position_m: tuple[float, float, float]) -> World:
     start = dataclasses.replace(world.start, xy_m=position_m[:2], altitude_m=position_m[2])
     return dataclasses.replace(world, start=start)
+
+
+def with_ideal_sensors(world: World) -> World:
+    """The world with every sensor error off (`--ideal-sensors`): truth, on time."""
+    return dataclasses.replace(world, sensor_noise=SensorNoise.ideal())

@@ -48,3 +48,13 @@ def recorded_s(path: Path) -> float:
     except (RecordingError, OSError, ValueError, KeyError, IndexError):
         return 0.0
     return float(t[-1]) if len(t) else 0.0
+
+
+def ideal_sensor_noise() -> dict[str, float]:
+    """A world file's `sensor_noise:` with every error off (units, frames and link timing
+    are tested without noise; the errors have tests of their own)."""
+    import dataclasses
+
+    from simbridge.sensor_noise import SensorNoise
+
+    return {k: v for k, v in dataclasses.asdict(SensorNoise.ideal()).items() if k != "seed"}

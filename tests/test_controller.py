@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from autopilot.controller import ControllerParams, FlightState, Setpoint, control
+from autopilot.controller import ControllerParams, FlightState, Setpoint, control, integrate
 from autopilot.ground_models import AnalyticGroundEffect, GroundEffectInputs, make_model
 from autopilot.runner import fixed_point_step
 from simbridge.config import ConfigError
@@ -16,7 +16,7 @@ from simbridge.rotors import rotor_forces_n, thrust_and_moments
 from simbridge.vehicle import GRAVITY_M_S2, load_vehicle
 
 V = load_vehicle()
-P = ControllerParams()
+P = ControllerParams(position_p=1.0, position_d=2.0, position_i=0.0)  # the thesis's gains
 LEVEL = FlightState((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
 
@@ -125,3 +125,25 @@ def test_the_ground_effect_fixed_point_converges_where_straight_feedback_diverge
         estimate = fixed_point_step((0.0, 0.0, estimate), (0.0, 0.0, gain * thrust), thrust)[2]
     assert estimate == pytest.approx(need * gain / (1 + gain), rel=1e-9)
     assert abs(straight) > 100  # the thesis's plain feedback oscillates ever wider
+
+
+def test_the_integral_sums_the_pd_term_and_stops_when_frozen_or_at_its_limit():
+    gains = ControllerParams()
+    pd = (0.0, 0.0, 0.5)  # a steady shortfall: the vehicle sags below its setpoint
+    i = (0.0, 0.0, 0.0)
+    for _ in range(250):  # one second at 250 Hz
+        i = integrate(i, pd, 0.004, gains, frozen=False)
+    assert i[2] == pytest.approx(gains.position_i * 0.5, rel=1e-9)
+    assert integrate(i, pd, 0.004, gains, frozen=True) == i
+    for _ in range(10000):
+        i = integrate(i, pd, 0.004, gains, frozen=False)
+    assert i[2] == pytest.approx(gains.integral_limit_m_s2)
+
+
+def test_a_saturated_command_is_flagged_so_that_the_integral_does_not_wind_up():
+    far_below = Setpoint((0.0, 0.0, -50.0))
+    out = control(LEVEL, far_below, (0.0, 0.0, 0.0), V, ControllerParams())
+    assert out.saturated
+    near = Setpoint((0.0, 0.0, 1.01))
+    out = control(LEVEL, near, (0.0, 0.0, 0.0), V, ControllerParams())
+    assert not out.saturated and out.pd_acceleration_m_s2[2] == pytest.approx(0.06)

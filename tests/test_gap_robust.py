@@ -200,10 +200,11 @@ def test_short_stretches_and_contact_with_any_surface_are_left_out_and_counted(
 def test_a_corrected_world_that_cannot_fly_its_replay_is_reported_and_the_report_written(
     tmp_path: Path,
 ) -> None:
-    """Logs of a vehicle 15% short of thrust: the corrected world (C_T scale 0.85) cannot
-    leave the ground cushion under the autopilot's position loop (no integral action: 15% of
-    g is 1.5 m of height error), so its replay of the held-out mission never lands; the run
-    still writes every output and exits 0."""
+    """Logs of a vehicle 28% short of thrust: in the corrected world (C_T scale 0.72) the
+    autopilot, flying the vehicle file's thrust, needs 3.8 m/s^2 more than it commands, beyond
+    what its position loop's integral may add (GFX_POS_I_MAX, 3 m/s^2), so its replay hangs
+    short of the held-out mission's waypoint and never lands; the run still writes every
+    output and exits 0."""
     # the replays' autopilot models a ground effect of rho 1: without one in the world it
     # would never leave the ground
     ge = [{"name": "ground_effect", "rho": 1.0}]
@@ -211,7 +212,7 @@ def test_a_corrected_world_that_cannot_fly_its_replay_is_reported_and_the_report
     mission = tmp_path / "hover.yaml"
     wp = {"position_m": [0.0, 0.0, 0.3], "hold_s": 1.0, "acceptance_radius_m": 0.05}
     mission.write_text(yaml.safe_dump({"takeoff_altitude_m": 0.3, "land": True, "waypoints": [wp]}))
-    true = {"thrust_mass": np.array([-0.15])}
+    true = {"thrust_mass": np.array([-0.28])}
     fit = write_flights(tmp_path / "logs", NANO, world, true, seeds=(0, 1), seconds=15.0)
     held = write_flights(tmp_path / "logs", NANO, world, true, seeds=(2,), seconds=15.0,
                          meta={"mission": str(mission)})  # fmt: skip
@@ -220,7 +221,7 @@ def test_a_corrected_world_that_cannot_fly_its_replay_is_reported_and_the_report
                "--folds", "2", "--out", str(out))  # fmt: skip
     assert done.returncode == 0, done.stderr
     figures = json.loads((out / "gap.json").read_text())
-    assert figures["chosen"]["thrust_mass"][0] == pytest.approx(-0.15, abs=0.01)
+    assert figures["chosen"]["thrust_mass"][0] == pytest.approx(-0.28, abs=0.01)
     closed = figures["closed_loop"]
     assert closed["status"] == "failed"
     (failure,) = closed["failed"]

@@ -11,7 +11,7 @@ from simbridge.effects.sensor_errors import SensorBiasParams, SensorLatencyParam
 from simbridge.hil import HilEncoder, mavlink
 from simbridge.physics import VehicleState, with_effects
 from simbridge.vehicle import load_vehicle
-from simbridge.world import SensorRates, load_world
+from simbridge.world import SensorRates, load_world, with_ideal_sensors
 
 VEHICLE = load_vehicle()
 
@@ -37,8 +37,10 @@ def decode(data: bytes) -> dict[str, list]:
 
 
 def every_step(world):
+    """Every message every step, from ideal sensors (units and frames are checked here;
+    the errors are in test_sensor_noise.py)."""
     rates = SensorRates(gps_hz=250, odometry_hz=250, distance_sensor_hz=250, esc_hz=250)
-    return dataclasses.replace(world, sensors=rates)
+    return dataclasses.replace(with_ideal_sensors(world), sensors=rates)
 
 
 def test_a_level_hovering_state_in_mavlink_units_and_frames():

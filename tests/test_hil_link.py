@@ -21,7 +21,7 @@ from pymavlink.rotmat import Vector3
 
 from simbridge.hil import mavlink
 from simbridge.launch import finish
-from tests.helpers import wait_for
+from tests.helpers import ideal_sensor_noise, wait_for
 
 G = 9.81
 START = {
@@ -61,7 +61,12 @@ def next_of(conn, kinds, seen):
 
 def test_a_pymavlink_client_drives_1000_lockstep_steps(sim_process, write_world):
     world = write_world(
-        {"origin": ORIGIN, "start": START, "effects": [{"name": "ground_effect", "rho": 1.0}]}
+        {
+            "origin": ORIGIN,
+            "start": START,
+            "effects": [{"name": "ground_effect", "rho": 1.0}],
+            "sensor_noise": ideal_sensor_noise(),
+        }
     )
     proc, port = sim_process(world)
     conn = connect(port)

@@ -29,10 +29,14 @@ MEMORY = load_memory(REPO / "learner" / "models" / "rho1.memory.npz")
 
 
 def shifted_batch(n: int = 64, shift_n: float = 0.02, seed: int = 0):
-    """Offline samples whose f_ge,z is `shift_n` stronger: a world the network has not seen."""
+    """Offline states whose f_ge,z is `shift_n` stronger than the network predicts: a world
+    the network has not seen. The targets are the network's own (the stored ones carry the
+    accelerometer's noise, which no update can learn and which would hide what it did)."""
     rng = np.random.default_rng(seed)
     pick = rng.choice(len(MEMORY.x), n, replace=False)
-    x, y = MEMORY.x[pick], MEMORY.y[pick].copy()
+    x = MEMORY.x[pick]
+    nz = BASE.normaliser
+    y = forward_np(BASE.weights, BASE.biases, (x - nz.x_mean) / nz.x_std) * nz.y_std + nz.y_mean
     y[:, 2] += shift_n
     return x, y
 
@@ -49,14 +53,18 @@ def anchor(settings: OnlineSettings) -> Anchor:
 
 @pytest.mark.parametrize("method", METHODS)
 def test_every_method_learns_a_shift_and_keeps_the_lipschitz_bound(method):
-    settings = OnlineSettings(method=method, learning_rate=3e-2)  # large steps push the norms
     x, y = standardised(*shifted_batch())
     w, b = tuple(BASE.weights), tuple(BASE.biases)
+    # one update at the default learning rate: the penalties (default lambda 1) hold the
+    # weights back, the rest follow
+    settings = OnlineSettings(method=method)
     result = update(w, b, x, y, settings, anchor(settings))
-    # one update: the penalties (default lambda 1) hold the weights back, the rest follow
     assert result.loss_after < (0.95 if method in ("constraint", "margin") else 0.8) * (
         result.loss_before
     )
+    # large steps push the norms: the bounds still hold after the update
+    settings = OnlineSettings(method=method, learning_rate=3e-2)
+    result = update(w, b, x, y, settings, anchor(settings))
     norms = [np.linalg.norm(m, ord=2) for m in result.weights]
     assert max(norms) <= BASE.header["layer_bound"] + 1e-9
     columns = result.weights[0][:, list(CONTROL_COLUMNS)]
@@ -329,24 +337,35 @@ def test_a_ground_station_flight_learns_in_the_learner_process():
 
 def test_a_protecting_method_adapts_to_rho2_and_forgets_less_than_naive(tmp_path):
     """Experiments 4.3/4.4 at the smallest scale (seed 0, deterministic): the rho1 network
-    adapted in a rho_sim = 2 world by `naive` and by `replay` holds closer than offline-only
-    there; carried back to rho = 1 (learning off), the one `replay` adapted has kept what
-    the offline network knew far from the ground, where rho 1 and rho 2 agree, and the one
-    `naive` adapted has lost it (judged along the offline network's own rho 1 flight)."""
-    from mission.campaigns.online_eval import far_error_n, hold_error, trial_file, world_file
+    adapted in a rho_sim = 2 world by `naive` and by `replay` predicts the ground effect near
+    the ground there better than offline-only (judged along the offline network's own rho 2
+    flight: the hold itself the position loop's integral flies out either way); carried back
+    to rho = 1 (learning off), the one `replay` adapted has kept what the offline network
+    knew far from the ground, where rho 1 and rho 2 agree, and the one `naive` adapted has
+    lost it (judged along the offline network's own rho 1 flight)."""
+    from mission.campaigns.online_eval import (
+        far_error_n,
+        hold_error,
+        near_error_n,
+        trial_file,
+        world_file,
+    )
 
     mission, start = trial_file(tmp_path, 0, 10.0)
     rho2, rho1 = world_file(tmp_path, 2.0), world_file(tmp_path, 1.0)
-    offline = hold_error(mission, start, rho2, "neural", 2.0, "rho1")
+    log2 = tmp_path / "offline_rho2.csv"
+    hold_error(mission, start, rho2, "neural", 2.0, "rho1", flight_log=log2)
+    offline_near = near_error_n(log2, "rho1", rho2, 2.0)
     log = tmp_path / "offline_rho1.csv"
     hold_error(mission, start, rho1, "neural", 1.0, "rho1", flight_log=log)
     offline_far = far_error_n(log, "rho1", rho1, 1.0)
-    errors, far = {}, {}
+    near, far = {}, {}
     for method in ("naive", "replay"):
         saved = tmp_path / f"{method}.npz"
         adapting = ("--online", method, "--save-model", str(saved))
-        errors[method] = hold_error(mission, start, rho2, "neural", 2.0, "rho1", *adapting)
+        hold_error(mission, start, rho2, "neural", 2.0, "rho1", *adapting)
+        near[method] = near_error_n(log2, saved, rho2, 2.0)
         far[method] = far_error_n(log, saved, rho1, 1.0)
-    assert errors["naive"] < offline and errors["replay"] < offline, (offline, errors)
+    assert near["naive"] < offline_near and near["replay"] < offline_near, (offline_near, near)
     assert offline_far < 0.002, offline_far  # the offline network knows the far field
     assert far["replay"] < 0.5 * far["naive"], far

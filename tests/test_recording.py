@@ -134,6 +134,20 @@ def test_true_and_predicted_ground_effect_are_both_recorded(flown):
     assert arrows[:, 2].max() > 0.05
 
 
+def test_the_estimators_error_against_the_truth_and_its_test_ratios_are_recorded(flown):
+    """The summary's RMS figures come from the same errors the recording holds."""
+    summary, _ = flown
+    recording = read_recording(summary["recording"])
+    t, position = recording.scalars("plots/estimator/position_error_m")
+    _, attitude = recording.scalars("plots/estimator/attitude_error_deg")
+    assert len(t) > 1000 and np.all(np.diff(t) > 0)
+    assert np.median(position[:, 0]) < 0.005  # motion capture: millimetres
+    assert np.max(attitude[:, 0]) < 2.0
+    assert summary["est_position_rms_m"] < 0.005
+    _, ratio = recording.scalars("plots/estimator/test_ratio/motion_capture_position")
+    assert len(ratio) > 100 and np.all(ratio[:, 0] < 1.0)  # nothing rejected in a calm flight
+
+
 def test_a_recording_cut_in_the_middle_of_a_message_reads_up_to_the_cut(flown, tmp_path):
     whole = Path(flown[0]["recording"]).read_bytes()
     cut = tmp_path / "cut.rrd"

@@ -87,7 +87,10 @@ def fly_log(
 ) -> Path:
     """Fly `mission` in `world` through `fly` (simulator and autopilot processes in lockstep,
     the autopilot arming by itself) and keep its flight log at `out` (reused if present);
-    `record`: its rerun recording too, beside it (.rrd)."""
+    `record`: its rerun recording too, beside it (.rrd). The sensors are ideal: the bench
+    scores how the diagnosis names a withheld physical effect, and a noisy, biased IMU
+    would be one more effect in every flight (the catalogue's sensor_bias and
+    sensor_latency are withheld as effects of their own)."""
     if out.exists():
         return out
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -99,7 +102,8 @@ def fly_log(
     raw, track = out.with_suffix(".clean.csv"), out.with_suffix(".track.npz")
     summary = fly(path, str(world), model, rho=1.0, via_gcs=False, flight_log=raw,
                   record=out.with_suffix(".rrd") if record else False,
-                  max_flight_s=max_flight_s, trajectory=track)  # fmt: skip
+                  max_flight_s=max_flight_s, trajectory=track,
+                  sim_options=["--ideal-sensors"])  # fmt: skip
     if not summary.get("landed") and not _ended_landing(track):
         raise RuntimeError(f"{out.name}: the flight did not land ({summary.get('ended')})")
     if not raw.exists():

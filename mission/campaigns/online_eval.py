@@ -19,6 +19,7 @@ reproducible).
 
 from __future__ import annotations
 
+import math
 import tempfile
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -28,7 +29,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from autopilot.metrics import FAR_FROM_GROUND_M
+from autopilot.metrics import FAR_FROM_GROUND_M, NEAR_GROUND_M
 from learner.flightlogs.readers import read_log
 from learner.model import load_model
 from learner.online.names import METHODS, PROTECTING
@@ -41,6 +42,7 @@ from simbridge.vehicle import load_vehicle
 from simbridge.world import load_world, resolve_world_path
 
 DEFAULT_HOLD_S = 10.0
+AIRBORNE_ABOVE_M = 0.015  # centre of mass above the flat ground: in the air (rests at 12.6 mm)
 SAME_M = 1e-5  # 0.01 mm: hold errors closer than this are the same
 MAX_FLIGHT_S = 240.0  # a trial lasts 30-80 s simulated; one that floats longer has failed
 
@@ -92,10 +94,24 @@ def far_error_n(flight_log: Path, network: str | Path, world: Path, rho: float) 
     at least FAR_FROM_GROUND_M above the (flat) ground, against equation 3.4 of the world.
     Up there rho 1 and rho 2 agree to a fraction of a millinewton, so what a network adapted
     at rho 2 gets wrong there is knowledge lost, not knowledge changed."""
+    return ge_error_n(flight_log, network, world, rho, FAR_FROM_GROUND_M, math.inf)
+
+
+def near_error_n(flight_log: Path, network: str | Path, world: Path, rho: float) -> float:
+    """The same below NEAR_GROUND_M (and in the air): what a network adapted near the ground
+    learnt there, whatever the position loop's integral made of it in the hold."""
+    return ge_error_n(flight_log, network, world, rho, AIRBORNE_ABOVE_M, NEAR_GROUND_M)
+
+
+def ge_error_n(
+    flight_log: Path, network: str | Path, world: Path, rho: float, lo_m: float, hi_m: float
+) -> float:
+    """RMS error [N] of `network`'s vertical ground effect over the steps of a logged flight
+    from `lo_m` to `hi_m` above the (flat) ground, against equation 3.4 of the world."""
     vehicle = load_vehicle(load_world(str(world)).vehicle)
     log = read_log(flight_log)
     height = log.position_m[:, 2]
-    far = height >= FAR_FROM_GROUND_M
+    far = (height >= lo_m) & (height <= hi_m)
     if not far.any():
         return float("nan")  # the flight never got that high
     n = log.rotor_speeds_rad_s[far]

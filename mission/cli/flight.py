@@ -8,7 +8,15 @@ from pathlib import Path
 from typing import Any
 
 from mission.cli.online import add_online_options
-from mission.cli.options import DEFAULT_GCS_URLS, DEFAULT_LOGS, gcs_options, model_options, speedup
+from mission.cli.options import (
+    DEFAULT_GCS_URLS,
+    DEFAULT_LOGS,
+    add_sensor_options,
+    gcs_options,
+    model_options,
+    sensor_arguments,
+    speedup,
+)
 from mission.recordings import add_record_options
 
 
@@ -37,6 +45,7 @@ def add_fly_parser(sub: Any) -> None:
         default=[],
         help="a vehicle parameter for this flight, repeatable (e.g. GFX_OL_LR=0.01)",
     )
+    add_sensor_options(p)
     add_online_options(p)
     add_record_options(p)
     p.set_defaults(func=cmd_fly)
@@ -81,7 +90,9 @@ def cmd_fly(args: argparse.Namespace) -> int:
     from mission.fly import describe, fly
 
     online_overrides(args)  # refuse --online without --model neural before starting anything
-    extra = pass_through(args) + [a for p in args.param for a in ("--param", p)]
+    sim_options, sensor_params = sensor_arguments(args)
+    # the user's --param last: it overrides a sensor set's
+    extra = pass_through(args) + sensor_params + [a for p in args.param for a in ("--param", p)]
     speedup = "max" if args.speedup is None else f"{args.speedup:g}"
     summary = fly(
         args.mission,
@@ -97,6 +108,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
         say=print if args.verbose else (lambda text: None),
         autopilot_options=extra,
         record=False if args.no_record else (args.record or True),
+        sim_options=sim_options,
     )
     print(json.dumps(summary) if args.json else describe(summary))
     return 0 if summary["landed"] else 1

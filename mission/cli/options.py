@@ -103,3 +103,32 @@ def gcs_options(p: argparse.ArgumentParser) -> None:
         help="sign MAVLink 2 to ground stations and accept only signed packets; the file "
         "holds 64 hex digits or a passphrase",
     )
+
+
+SENSOR_SET_NAMES = ("mocap", "flow", "gps")
+
+
+def add_sensor_options(p: argparse.ArgumentParser) -> None:
+    """`--sensors` and `--ideal-sensors`: what the estimator fuses, and whether the simulated
+    sensors err as real ones do."""
+    p.add_argument(
+        "--sensors",
+        choices=SENSOR_SET_NAMES,
+        default="mocap",
+        help="the estimator's sensors: motion capture (default), flow and range, GPS and "
+        "barometer (sets the EKF2_* parameters; the IMU always predicts)",
+    )
+    p.add_argument(
+        "--ideal-sensors",
+        action="store_true",
+        help="sensors without noise, bias or latency (the simulator's truth, on time)",
+    )
+
+
+def sensor_arguments(args: argparse.Namespace) -> tuple[list[str], list[str]]:
+    """(the simulator's options, the autopilot's --param options) for the chosen sensors."""
+    from autopilot.navigation import SENSOR_SETS
+
+    sim = ["--ideal-sensors"] if args.ideal_sensors else []
+    params = [a for k, v in SENSOR_SETS[args.sensors].items() for a in ("--param", f"{k}={v}")]
+    return sim, params

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import faulthandler
 import signal
 import sys
@@ -26,6 +27,17 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument(
         "--start", metavar="X,Y,Z", help="start position in metres, overriding the world's"
+    )
+    p.add_argument(
+        "--ideal-sensors",
+        action="store_true",
+        help="sensors without noise, bias or latency (the world's sensor_noise turned off)",
+    )
+    p.add_argument(
+        "--sensor-seed",
+        type=int,
+        metavar="N",
+        help="seed of the sensor errors, overriding the world's sensor_noise.seed",
     )
     p.add_argument(
         "--speedup",
@@ -56,9 +68,17 @@ def add_parser(sub: Any) -> None:
 def cmd_sim(args: argparse.Namespace) -> int:
     from simbridge.server import LinkEnded, ServerOptions, SimServer
     from simbridge.vehicle import load_vehicle
-    from simbridge.world import load_world, parse_start, with_start
+    from simbridge.world import load_world, parse_start, with_ideal_sensors, with_start
 
     world = load_world(args.world)
+    if args.ideal_sensors:
+        world = with_ideal_sensors(world)
+    elif args.sensor_seed is not None:
+        if not 0 <= args.sensor_seed < 2**31:
+            print(f"groundfx sim: --sensor-seed: expected 0 to {2**31 - 1}", file=sys.stderr)
+            return 2
+        noise = dataclasses.replace(world.sensor_noise, seed=args.sensor_seed)
+        world = dataclasses.replace(world, sensor_noise=noise)
     if args.start:
         world = with_start(world, parse_start(args.start))
     vehicle = load_vehicle(world.vehicle)

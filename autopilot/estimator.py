@@ -1,0 +1,312 @@
+"""The state estimator: an error-state extended Kalman filter, as pure functions.
+
+In the manner of PX4's EKF2 and the Crazyflie's: the IMU predicts (specific force and body
+rates integrated, biases subtracted), measurements correct. The nominal state is position,
+velocity (world x east, y north, z up), attitude (quaternion w, x, y, z, body FLU to world),
+accelerometer and gyro biases (body). The filter's covariance is over the 15 errors
+[dp, dv, dtheta, dba, dbg], dtheta a small rotation in the body frame (Sola, "Quaternion
+kinematics for the error-state Kalman filter", 2017, sections 5 and 7).
+
+Each correction returns the new state and its innovation test ratio, PX4's figure:
+the largest of innovation^2 / (gate^2 * innovation variance) over the measurement's axes;
+above 1 the measurement is rejected and the state is unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from simbridge.vehicle import GRAVITY_M_S2
+
+GRAVITY_WORLD = np.array([0.0, 0.0, -GRAVITY_M_S2])
+N_ERRORS = 15
+P_, V_, TH_, BA_, BG_ = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
+
+
+@dataclass(frozen=True)
+class ProcessNoise:
+    """IMU noise as the filter assumes it (a little above the sensors', for model error)."""
+
+    accel_noise_density: float = 1.8e-3  # m/s^2/sqrt(Hz)
+    gyro_noise_density: float = 5e-4  # rad/s/sqrt(Hz)
+    accel_bias_walk: float = 1e-4  # m/s^2/sqrt(s)
+    gyro_bias_walk: float = 1e-4  # rad/s/sqrt(s)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    time_us: int
+    position_m: np.ndarray  # world
+    velocity_m_s: np.ndarray  # world
+    quaternion: np.ndarray  # (w, x, y, z) body to world
+    accel_bias_m_s2: np.ndarray  # body
+    gyro_bias_rad_s: np.ndarray  # body
+    covariance: np.ndarray  # 15 x 15
+    angular_velocity_body_rad_s: np.ndarray  # the last gyro sample, bias removed
+
+
+@dataclass(frozen=True)
+class Fused:
+    estimate: Estimate
+    test_ratio: float
+    accepted: bool
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def rotation(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+
+
+def rotation_vector_quat(theta: np.ndarray) -> np.ndarray:
+    """The quaternion of a rotation vector (exact)."""
+    angle = float(np.linalg.norm(theta))
+    if angle < 1e-12:
+        return np.array([1.0, 0.5 * theta[0], 0.5 * theta[1], 0.5 * theta[2]])
+    s = math.sin(0.5 * angle) / angle
+    return np.array([math.cos(0.5 * angle), s * theta[0], s * theta[1], s * theta[2]])
+
+
+def initial(
+    time_us: int,
+    position_m: np.ndarray,
+    quaternion: np.ndarray,
+    position_sd_m: float,
+    attitude_sd_rad: float,
+    accel_bias_sd: float = 0.1,
+    gyro_bias_sd: float = 0.01,
+) -> Estimate:
+    """At rest: velocity zero (0.1 m/s), the biases unknown within the given spreads."""
+    sd = np.concatenate(
+        [
+            np.full(3, position_sd_m),
+            np.full(3, 0.1),
+            np.full(3, attitude_sd_rad),
+            np.full(3, accel_bias_sd),
+            np.full(3, gyro_bias_sd),
+        ]
+    )
+    return Estimate(
+        time_us=time_us,
+        position_m=np.asarray(position_m, dtype=float),
+        velocity_m_s=np.zeros(3),
+        quaternion=np.asarray(quaternion, dtype=float),
+        accel_bias_m_s2=np.zeros(3),
+        gyro_bias_rad_s=np.zeros(3),
+        covariance=np.diag(sd * sd),
+        angular_velocity_body_rad_s=np.zeros(3),
+    )
+
+
+def attitude_from_gravity_and_field(
+    specific_force_body: np.ndarray, field_body: np.ndarray, field_world: np.ndarray
+) -> np.ndarray:
+    """Attitude of a vehicle at rest: the specific force points up, the magnetic field's
+    horizontal part north-ish as in the world (TRIAD)."""
+
+    def triad(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        t1 = a / np.linalg.norm(a)
+        t2 = np.cross(a, b)
+        t2 /= np.linalg.norm(t2)
+        return np.column_stack([t1, t2, np.cross(t1, t2)])
+
+    r = triad(np.array([0.0, 0.0, 1.0]), field_world) @ triad(specific_force_body, field_body).T
+    return matrix_quat(r)
+
+
+def matrix_quat(r: np.ndarray) -> np.ndarray:
+    tr = r[0, 0] + r[1, 1] + r[2, 2]
+    if tr > 0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
+    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
+        q = [(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s]
+    elif r[1, 1] > r[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
+        q = [(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
+        q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
+    out = np.array(q)
+    return out / np.linalg.norm(out) * (1.0 if out[0] >= 0 else -1.0)
+
+
+def predict(
+    est: Estimate,
+    time_us: int,
+    specific_force_body: np.ndarray,
+    rates_body: np.ndarray,
+    noise: ProcessNoise,
+) -> Estimate:
+    """Propagate over the IMU sample that ended at `time_us` (its mean over the period)."""
+    dt = (time_us - est.time_us) * 1e-6
+    if dt <= 0.0:
+        return est
+    dt = min(dt, 0.1)  # a gap in the IMU stream is not integrated as one long step
+    r = rotation(est.quaternion)
+    f = specific_force_body - est.accel_bias_m_s2
+    w = rates_body - est.gyro_bias_rad_s
+    a = r @ f + GRAVITY_WORLD
+    position = est.position_m + est.velocity_m_s * dt + 0.5 * a * dt * dt
+    velocity = est.velocity_m_s + a * dt
+    q = quat_mul(est.quaternion, rotation_vector_quat(w * dt))
+    q /= np.linalg.norm(q)
+
+    fx = np.eye(N_ERRORS)
+    fx[P_, V_] = np.eye(3) * dt
+    fx[V_, TH_] = -(r @ skew(f)) * dt
+    fx[V_, BA_] = -r * dt
+    fx[TH_, TH_] = rotation(rotation_vector_quat(-w * dt))
+    fx[TH_, BG_] = -np.eye(3) * dt
+    p = fx @ est.covariance @ fx.T
+    idx = np.arange(3)
+    p[3 + idx, 3 + idx] += noise.accel_noise_density**2 * dt
+    p[6 + idx, 6 + idx] += noise.gyro_noise_density**2 * dt
+    p[9 + idx, 9 + idx] += noise.accel_bias_walk**2 * dt
+    p[12 + idx, 12 + idx] += noise.gyro_bias_walk**2 * dt
+    return Estimate(
+        time_us=time_us,
+        position_m=position,
+        velocity_m_s=velocity,
+        quaternion=q,
+        accel_bias_m_s2=est.accel_bias_m_s2,
+        gyro_bias_rad_s=est.gyro_bias_rad_s,
+        covariance=p,
+        angular_velocity_body_rad_s=w,
+    )
+
+
+def correct(
+    est: Estimate, innovation: np.ndarray, h: np.ndarray, variance: np.ndarray, gate_sd: float
+) -> Fused:
+    """The Kalman correction for `innovation` = measured - predicted with Jacobian `h` (m x 15)
+    and measurement variances `variance` (m); rejected beyond `gate_sd` standard deviations."""
+    p = est.covariance
+    ph = p @ h.T
+    s = h @ ph + np.diag(variance)
+    ratio = float(np.max(innovation * innovation / (gate_sd * gate_sd * np.diag(s))))
+    if not ratio <= 1.0:  # NaN is rejected too
+        return Fused(est, ratio, False)
+    k = ph @ np.linalg.inv(s)
+    dx = k @ innovation
+    ikh = np.eye(N_ERRORS) - k @ h
+    p_new = ikh @ p @ ikh.T + (k * variance) @ k.T  # Joseph form: stays positive definite
+    q = quat_mul(est.quaternion, rotation_vector_quat(dx[TH_]))
+    q /= np.linalg.norm(q)
+    updated = Estimate(
+        time_us=est.time_us,
+        position_m=est.position_m + dx[P_],
+        velocity_m_s=est.velocity_m_s + dx[V_],
+        quaternion=q,
+        accel_bias_m_s2=est.accel_bias_m_s2 + dx[BA_],
+        gyro_bias_rad_s=est.gyro_bias_rad_s + dx[BG_],
+        covariance=0.5 * (p_new + p_new.T),
+        angular_velocity_body_rad_s=est.angular_velocity_body_rad_s,
+    )
+    return Fused(updated, ratio, True)
+
+
+def _rows(block: slice, rows: np.ndarray, axes: list[int] | None = None) -> np.ndarray:
+    h = np.zeros((len(rows) if axes is None else len(axes), N_ERRORS))
+    h[:, block] = rows if axes is None else rows[axes]
+    return h
+
+
+def fuse_position(
+    est: Estimate,
+    measured_m: np.ndarray,
+    predicted_m: np.ndarray,
+    sd_m: np.ndarray,
+    gate_sd: float,
+    axes: list[int] | None = None,
+) -> Fused:
+    """A position (world) on the given axes; `predicted_m` is the filter's position at the
+    measurement's capture time (a delayed measurement corrects the present state)."""
+    axes = [0, 1, 2] if axes is None else axes
+    innovation = (measured_m - predicted_m)[axes]
+    return correct(est, innovation, _rows(P_, np.eye(3), axes), sd_m[axes] ** 2, gate_sd)
+
+
+def fuse_velocity(est: Estimate, measured_m_s: np.ndarray, sd_m_s: float, gate_sd: float) -> Fused:
+    """A world-frame velocity (GPS)."""
+    innovation = measured_m_s - est.velocity_m_s
+    return correct(est, innovation, _rows(V_, np.eye(3)), np.full(3, sd_m_s**2), gate_sd)
+
+
+def fuse_attitude(
+    est: Estimate,
+    measured: np.ndarray,
+    predicted: np.ndarray,
+    sd_rad: float,
+    gate_sd: float,
+) -> Fused:
+    """A full attitude (motion capture); `predicted` is the filter's at capture time. The
+    innovation is the small body-frame rotation from the prediction to the measurement."""
+    conj = predicted * np.array([1.0, -1.0, -1.0, -1.0])
+    d = quat_mul(conj, measured)
+    if d[0] < 0.0:
+        d = -d
+    innovation = 2.0 * d[1:]
+    return correct(est, innovation, _rows(TH_, np.eye(3)), np.full(3, sd_rad**2), gate_sd)
+
+
+def fuse_heading(
+    est: Estimate, field_body: np.ndarray, field_world: np.ndarray, sd_rad: float, gate_sd: float
+) -> Fused:
+    """The magnetometer's heading: its field turned into the world by the estimated attitude,
+    compared horizontally with the known field; corrects yaw only."""
+    r = rotation(est.quaternion)
+    f = r @ field_body
+    innovation = math.atan2(field_world[1], field_world[0]) - math.atan2(f[1], f[0])
+    innovation = (innovation + math.pi) % (2.0 * math.pi) - math.pi
+    h = np.zeros((1, N_ERRORS))
+    h[0, TH_] = r[2, :]  # a body rotation dtheta turns the heading by (R dtheta)_z
+    return correct(est, np.array([innovation]), h, np.array([sd_rad**2]), gate_sd)
+
+
+def fuse_height(
+    est: Estimate, height_m: float, terrain_m: float, sd_m: float, gate_sd: float
+) -> Fused:
+    """A height above the terrain at `terrain_m` (range finder, barometer against its
+    reference)."""
+    innovation = np.array([height_m - (est.position_m[2] - terrain_m)])
+    return correct(est, innovation, _rows(P_, np.eye(3), [2]), np.array([sd_m**2]), gate_sd)
+
+
+def fuse_body_velocity(
+    est: Estimate, measured_xy_m_s: np.ndarray, sd_m_s: float, gate_sd: float
+) -> Fused:
+    """The horizontal body-frame velocity of an optical-flow sensor (flow times height)."""
+    r = rotation(est.quaternion)
+    v_body = r.T @ est.velocity_m_s
+    innovation = measured_xy_m_s - v_body[:2]
+    h = np.zeros((2, N_ERRORS))
+    h[:, V_] = r.T[:2, :]
+    h[:, TH_] = skew(v_body)[:2, :]
+    return correct(est, innovation, h, np.full(2, sd_m_s**2), gate_sd)

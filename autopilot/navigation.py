@@ -1,0 +1,447 @@
+"""The estimator's edge: sensors out of the HIL messages, into the filter, a state out.
+
+The control path reads only what this module estimates from the sensors (HIL_SENSOR's IMU,
+magnetometer and barometer; ODOMETRY from motion capture; HIL_GPS; the downward range and
+HIL_OPTICAL_FLOW). HIL_STATE_QUATERNION, the simulator's truth, is never read here.
+
+Which sensors correct the filter is chosen by parameters named as PX4's EKF2 names them
+(`EstimatorParams`). The height reference (EKF2_HGT_REF) falls back, when its source goes
+quiet, to the next available of range, barometer, GPS. A downward range reading also feeds
+a one-state terrain estimate (PX4's terrain estimator), so the height above the surface
+below (the ground-effect model's input) is the estimated altitude minus the terrain's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from autopilot import estimator as ekf
+from autopilot.controller import FlightState
+from autopilot.simlink import Step
+from simbridge.config import param
+from simbridge.frames import frd_to_flu, geodetic_to_local, ned_to_enu, quat_ned_frd_to_enu_flu
+
+HEIGHT_BARO, HEIGHT_GPS, HEIGHT_RANGE, HEIGHT_VISION = 0, 1, 2, 3
+HEIGHT_NAMES = {0: "baro", 1: "gps", 2: "range", 3: "vision"}
+EV_HPOS, EV_VPOS, EV_ATT = 1, 2, 8
+GPS_POS, GPS_ALT, GPS_VEL = 1, 2, 4
+SENSOR_SETS = {  # `--sensors NAME`: the parameters of each sensor set
+    "mocap": {"EKF2_EV_CTRL": 11, "EKF2_GPS_CTRL": 0, "EKF2_OF_CTRL": 1, "EKF2_HGT_REF": 3},
+    "flow": {"EKF2_EV_CTRL": 0, "EKF2_GPS_CTRL": 0, "EKF2_OF_CTRL": 1, "EKF2_HGT_REF": 2},
+    "gps": {"EKF2_EV_CTRL": 0, "EKF2_GPS_CTRL": 7, "EKF2_OF_CTRL": 0, "EKF2_HGT_REF": 0},
+}
+TERRAIN_SLOPE = 0.005  # m of surface height change per m flown, as the terrain's process noise
+RESTING_SD_M = 0.0005  # how well a standing vehicle knows the surface under it
+HISTORY_STEPS = 64  # 0.26 s at 250 Hz: the oldest delayed measurement that can be fused
+
+
+@dataclass(frozen=True)
+class EstimatorParams:
+    ev_ctrl: int = param(
+        11, lo=0, hi=15, doc="motion capture: 1 horizontal position, 2 vertical, 8 attitude"
+    )
+    gps_ctrl: int = param(0, lo=0, hi=7, doc="GPS: 1 lat/lon, 2 altitude, 4 velocity")
+    of_ctrl: int = param(1, lo=0, hi=1, doc="optical flow: 1 fused while the range is valid")
+    rng_ctrl: int = param(
+        1, lo=0, hi=1, doc="range: 1 terrain, and height when it is the reference"
+    )
+    baro_ctrl: int = param(1, lo=0, hi=1, doc="barometer: 1 height when it is the reference")
+    hgt_ref: int = param(3, lo=0, hi=3, doc="height reference: 0 baro, 1 GPS, 2 range, 3 vision")
+    mag_decl_deg: float = param(
+        5.5, unit="deg", lo=-180.0, hi=180.0, doc="magnetic declination (packaged worlds: 5.5)"
+    )
+    ev_pos_noise_m: float = param(0.002, unit="m", lo=1e-4, hi=10.0, doc="mocap position sd")
+    ev_att_noise_rad: float = param(0.005, unit="rad", lo=1e-4, hi=1.0, doc="mocap attitude sd")
+    rng_noise_m: float = param(0.003, unit="m", lo=1e-4, hi=1.0, doc="range sd at short range")
+    rng_noise_per_m: float = param(0.01, lo=0.0, hi=1.0, doc="range sd added per metre")
+    of_noise_rad_s: float = param(0.15, unit="rad/s", lo=1e-3, hi=10.0, doc="flow rate sd")
+    gps_pos_noise_m: float = param(0.5, unit="m", lo=0.01, hi=100.0, doc="GPS position sd")
+    gps_vel_noise_m_s: float = param(0.15, unit="m/s", lo=0.01, hi=10.0, doc="GPS velocity sd")
+    baro_noise_m: float = param(0.15, unit="m", lo=0.01, hi=100.0, doc="barometer height sd")
+    mag_noise_rad: float = param(0.05, unit="rad", lo=1e-3, hi=3.0, doc="heading sd")
+    gate_sd: float = param(5.0, lo=1.0, hi=100.0, doc="innovation gate, standard deviations")
+    source_timeout_s: float = param(
+        0.3, unit="s", lo=0.01, hi=10.0, doc="a source silent this long is lost"
+    )
+
+
+@dataclass(frozen=True)
+class Imu:
+    time_us: int
+    specific_force: np.ndarray  # body FLU, m/s^2
+    rates: np.ndarray  # body FLU, rad/s
+    field: np.ndarray  # body FLU, gauss
+    pressure_hpa: float
+
+
+def imu_from(step: Step) -> Imu:
+    s = step.sensor
+    return Imu(
+        time_us=s["time_usec"],
+        specific_force=np.array(frd_to_flu((s["xacc"], s["yacc"], s["zacc"]))),
+        rates=np.array(frd_to_flu((s["xgyro"], s["ygyro"], s["zgyro"]))),
+        field=np.array(frd_to_flu((s["xmag"], s["ymag"], s["zmag"]))),
+        pressure_hpa=s["abs_pressure"],
+    )
+
+
+def pressure_altitude_m(pressure_hpa: float) -> float:
+    """The international standard atmosphere's altitude of a pressure (troposphere)."""
+    return (1.0 - (pressure_hpa / 1013.25) ** (1.0 / 5.25588)) / 2.25577e-5
+
+
+@dataclass
+class Quality:
+    """Innovation test ratios (largest seen, last) and counts per source, for the summary."""
+
+    fused: dict[str, int] = field(default_factory=dict)
+    rejected: dict[str, int] = field(default_factory=dict)
+    ratio_max: dict[str, float] = field(default_factory=dict)
+    last_ratio: dict[str, float] = field(default_factory=dict)
+    this_step: dict[str, float] = field(default_factory=dict)  # the ratios of the last update
+    resets: int = 0
+
+    def note(self, source: str, fused: ekf.Fused) -> None:
+        book = self.fused if fused.accepted else self.rejected
+        book[source] = book.get(source, 0) + 1
+        self.last_ratio[source] = fused.test_ratio
+        self.this_step[source] = fused.test_ratio
+        if math.isfinite(fused.test_ratio):
+            self.ratio_max[source] = max(self.ratio_max.get(source, 0.0), fused.test_ratio)
+
+
+class Navigation:
+    """One flight's estimator: its state, the delayed-measurement history, the terrain."""
+
+    def __init__(
+        self, params: EstimatorParams, origin: tuple[float, float, float], resting_height_m: float
+    ) -> None:
+        self.params = params
+        self.origin = origin
+        self.resting_height_m = resting_height_m
+        self.noise = ekf.ProcessNoise()
+        self.estimate: ekf.Estimate | None = None
+        self.quality = Quality()
+        # (time_us, displacement sum, rotation product) of the predictions alone
+        self._history: deque[tuple[int, np.ndarray, np.ndarray]] = deque(maxlen=HISTORY_STEPS)
+        self._moved = np.zeros(3)
+        self._turned = np.array([1.0, 0.0, 0.0, 0.0])
+        self._last_seen: dict[str, float] = {}
+        self.terrain_m = 0.0
+        self._terrain_var = 1.0
+        self._terrain_us = 0
+        self._baro_ref_m: float | None = None
+        self.height_source = HEIGHT_NAMES[params.hgt_ref]
+        self.range_m: float | None = None
+        self.events: list[str] = []
+
+    # -- what the rest of the autopilot reads ---------------------------------------------
+
+    @property
+    def ready(self) -> bool:
+        return self.estimate is not None
+
+    def state(self) -> FlightState:
+        e = self.estimate
+        assert e is not None
+        p, v, q, w = e.position_m, e.velocity_m_s, e.quaternion, e.angular_velocity_body_rad_s
+        return FlightState(
+            position_m=(float(p[0]), float(p[1]), float(p[2])),
+            velocity_m_s=(float(v[0]), float(v[1]), float(v[2])),
+            quaternion=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+            angular_velocity_body_rad_s=(float(w[0]), float(w[1]), float(w[2])),
+        )
+
+    def accel_bias_m_s2(self) -> tuple[float, float, float]:
+        assert self.estimate is not None
+        b = self.estimate.accel_bias_m_s2
+        return (float(b[0]), float(b[1]), float(b[2]))
+
+    def height_m(self) -> float:
+        """Centre of mass above the surface below."""
+        assert self.estimate is not None
+        return float(self.estimate.position_m[2]) - self.terrain_m
+
+    def position_lost(self, t: float) -> str | None:
+        """Why the horizontal position is no longer measured (a configured position source
+        went quiet), or None."""
+        timeout = self.params.source_timeout_s
+        for name, wanted in (
+            ("motion capture", self.params.ev_ctrl & EV_HPOS),
+            ("GPS", self.params.gps_ctrl & GPS_POS),
+        ):
+            seen = self._last_seen.get(name)
+            if wanted and seen is not None and t - seen > timeout:
+                return f"{name} lost"
+        return None
+
+    # -- one control step ------------------------------------------------------------------
+
+    def update(self, step: Step) -> None:
+        self.quality.this_step.clear()
+        imu = imu_from(step)
+        t = imu.time_us * 1e-6
+        if self.estimate is None:
+            self._initialise(step, imu)
+            return
+        before = self.estimate
+        self.estimate = ekf.predict(before, imu.time_us, imu.specific_force, imu.rates, self.noise)
+        dt = (self.estimate.time_us - before.time_us) * 1e-6
+        self._moved = self._moved + (self.estimate.position_m - before.position_m)
+        turn = ekf.rotation_vector_quat(self.estimate.angular_velocity_body_rad_s * dt)
+        turned = ekf.quat_mul(self._turned, turn)
+        self._turned = turned / np.linalg.norm(turned)
+        self._record(imu.time_us)
+        p = self.params
+        if p.ev_ctrl and "ODOMETRY" in step.new:
+            self._fuse_mocap(step.latest["ODOMETRY"], t)
+        if p.gps_ctrl and "HIL_GPS" in step.new:
+            self._fuse_gps(step.latest["HIL_GPS"], t)
+        range_m = range_reading(step)
+        self.range_m = range_m
+        if range_m is not None:
+            self._last_seen["range"] = t
+        if not (p.ev_ctrl & EV_ATT and self._alive("motion capture", t)) and imu.field.any():
+            self._fuse("heading", ekf.fuse_heading(
+                self.estimate, imu.field, self._field_world(), p.mag_noise_rad, p.gate_sd
+            ))  # fmt: skip
+        if p.of_ctrl and "HIL_OPTICAL_FLOW" in step.new:
+            self._fuse_flow(step.latest["HIL_OPTICAL_FLOW"], imu, t)
+        self._fuse_height(imu, range_m, t)
+
+    def _alive(self, source: str, t: float) -> bool:
+        return t - self._last_seen.get(source, -math.inf) <= self.params.source_timeout_s
+
+    def _record(self, time_us: int) -> None:
+        self._history.append((time_us, self._moved.copy(), self._turned.copy()))
+
+    def _at_capture(self, capture_us: int) -> tuple[np.ndarray, np.ndarray]:
+        """The filter's position and attitude at `capture_us`: the present estimate less what
+        the predictions moved and turned since."""
+        e = self.estimate
+        assert e is not None
+        then = self._history[0]
+        for entry in reversed(self._history):
+            if entry[0] <= capture_us:
+                then = entry
+                break
+        now = self._history[-1]
+        position = e.position_m - (now[1] - then[1])
+        back = ekf.quat_mul(now[2] * np.array([1.0, -1.0, -1.0, -1.0]), then[2])
+        return position, ekf.quat_mul(e.quaternion, back)
+
+    def _fuse(self, source: str, fused: ekf.Fused) -> bool:
+        self.quality.note(source, fused)
+        self.estimate = fused.estimate
+        return fused.accepted
+
+    def _field_world(self) -> np.ndarray:
+        d = math.radians(self.params.mag_decl_deg)
+        return np.array([math.sin(d), math.cos(d), 0.0])
+
+    # -- initial alignment --------------------------------------------------------------------
+
+    def _initialise(self, step: Step, imu: Imu) -> None:
+        p = self.params
+        mocap = step.latest.get("ODOMETRY") if p.ev_ctrl else None
+        gps = step.latest.get("HIL_GPS") if p.gps_ctrl & GPS_POS else None
+        if p.ev_ctrl and mocap is None:
+            return  # wait for the first pose
+        if p.gps_ctrl & GPS_POS and gps is None:
+            return
+        if mocap is not None and p.ev_ctrl & EV_ATT:
+            q = np.array(quat_ned_frd_to_enu_flu(tuple(mocap["q"])))
+            attitude_sd = p.ev_att_noise_rad
+        else:
+            q = ekf.attitude_from_gravity_and_field(
+                imu.specific_force, imu.field, self._field_world()
+            )
+            attitude_sd = 0.05
+        if mocap is not None:
+            self._last_seen["motion capture"] = imu.time_us * 1e-6
+            position = np.array(ned_to_enu((mocap["x"], mocap["y"], mocap["z"])))
+            position_sd = p.ev_pos_noise_m
+        elif gps is not None:
+            # horizontally where the fix says; vertically the vehicle stands on the ground
+            # (a fix's altitude errs by metres; PX4's local frame starts at its height too)
+            east, north, _ = self._gps_position(gps)
+            position = np.array([east, north, self.resting_height_m])
+            position_sd = p.gps_pos_noise_m
+        else:  # flow: the local frame starts where the vehicle stands
+            position = np.array([0.0, 0.0, self.resting_height_m])
+            position_sd = 0.01
+        self.estimate = ekf.initial(imu.time_us, position, q, position_sd, attitude_sd)
+        self._baro_ref_m = pressure_altitude_m(imu.pressure_hpa) - position[2]
+        self._record(imu.time_us)
+        self.events.append(
+            f"estimator aligned ({', '.join(self.sources())}; height {self.height_source})"
+        )
+
+    def sources(self) -> list[str]:
+        p = self.params
+        names = []
+        if p.ev_ctrl:
+            names.append("motion capture")
+        if p.gps_ctrl:
+            names.append("GPS")
+        if p.of_ctrl:
+            names.append("optical flow")
+        if p.rng_ctrl:
+            names.append("range")
+        if p.baro_ctrl and p.hgt_ref == HEIGHT_BARO:
+            names.append("barometer")
+        if not p.ev_ctrl & EV_ATT:
+            names.append("magnetometer")
+        return names
+
+    # -- the sources ---------------------------------------------------------------------------
+
+    def _fuse_mocap(self, m: dict, t: float) -> None:
+        p = self.params
+        self._last_seen["motion capture"] = t
+        position, attitude = self._at_capture(m["time_usec"])
+        measured = np.array(ned_to_enu((m["x"], m["y"], m["z"])))
+        axes = ([0, 1] if p.ev_ctrl & EV_HPOS else []) + (
+            [2] if p.ev_ctrl & EV_VPOS and self.height_source == "vision" else []
+        )
+        if axes:
+            sd = np.full(3, p.ev_pos_noise_m)
+            fused = ekf.fuse_position(self.estimate, measured, position, sd, p.gate_sd, axes)
+            self._fuse("motion capture position", fused)
+        if p.ev_ctrl & EV_ATT:
+            q = np.array(quat_ned_frd_to_enu_flu(tuple(m["q"])))
+            fused = ekf.fuse_attitude(self.estimate, q, attitude, p.ev_att_noise_rad, p.gate_sd)
+            self._fuse("motion capture attitude", fused)
+
+    def _gps_position(self, g: dict) -> tuple[float, float, float]:
+        o = self.origin
+        east, north = geodetic_to_local(o[0], o[1], g["lat"] * 1e-7, g["lon"] * 1e-7)
+        return (east, north, g["alt"] * 1e-3 - o[2])
+
+    def _fuse_gps(self, g: dict, t: float) -> None:
+        p = self.params
+        if g["fix_type"] < 3:
+            return
+        self._last_seen["GPS"] = t
+        position, _ = self._at_capture(g["time_usec"])
+        axes = ([0, 1] if p.gps_ctrl & GPS_POS else []) + (
+            [2] if p.gps_ctrl & GPS_ALT and self.height_source == "gps" else []
+        )
+        if axes:
+            measured = np.array(self._gps_position(g))
+            sd = np.array([p.gps_pos_noise_m, p.gps_pos_noise_m, 1.6 * p.gps_pos_noise_m])
+            self._fuse("GPS position", ekf.fuse_position(
+                self.estimate, measured, position, sd, p.gate_sd, axes
+            ))  # fmt: skip
+        if p.gps_ctrl & GPS_VEL:
+            v = np.array(ned_to_enu((g["vn"] * 0.01, g["ve"] * 0.01, g["vd"] * 0.01)))
+            self._fuse("GPS velocity", ekf.fuse_velocity(
+                self.estimate, v, p.gps_vel_noise_m_s, p.gate_sd
+            ))  # fmt: skip
+
+    def _range_sd(self, range_m: float) -> float:
+        return self.params.rng_noise_m + self.params.rng_noise_per_m * range_m
+
+    def _fuse_flow(self, f: dict, imu: Imu, t: float) -> None:
+        """Flow (body FRD, integrated over the message's interval) less the gyro's share,
+        times the height: the body's horizontal velocity."""
+        p = self.params
+        dt = f["integration_time_us"] * 1e-6
+        height = f["distance"]
+        if f["quality"] == 0 or dt <= 0.0 or not height > 0.0:
+            return
+        self._last_seen["optical flow"] = t
+        rates = imu.rates - self.estimate.gyro_bias_rad_s  # FLU; flow was made in FRD
+        # FRD: flow_x = (p - v_y / h) dt, flow_y = (q + v_x / h) dt  (simbridge/hil.py)
+        p_frd, q_frd = rates[0], -rates[1]
+        vy_frd = (p_frd - f["integrated_x"] / dt) * height
+        vx_frd = (f["integrated_y"] / dt - q_frd) * height
+        v_flu = np.array([vx_frd, -vy_frd])
+        sd = p.of_noise_rad_s * max(height, 0.05)
+        self._fuse("optical flow", ekf.fuse_body_velocity(self.estimate, v_flu, sd, p.gate_sd))
+
+    def _height_source(self, t: float) -> str:
+        """The reference if it is alive, else the first live fallback."""
+        p = self.params
+        timeout = p.source_timeout_s
+        alive = {
+            "vision": bool(p.ev_ctrl & EV_VPOS)
+            and t - self._last_seen.get("motion capture", -math.inf) <= timeout,
+            "range": bool(p.rng_ctrl) and t - self._last_seen.get("range", -math.inf) <= timeout,
+            "baro": bool(p.baro_ctrl),
+            "gps": bool(p.gps_ctrl & GPS_ALT) and t - self._last_seen.get("GPS", -math.inf) <= 1.0,
+        }
+        wanted = HEIGHT_NAMES[p.hgt_ref]
+        if alive[wanted]:
+            return wanted
+        for name in ("range", "baro", "gps"):
+            if alive[name]:
+                return name
+        return wanted
+
+    def _fuse_height(self, imu: Imu, range_m: float | None, t: float) -> None:
+        p = self.params
+        source = self._height_source(t)
+        if source != self.height_source:
+            self.events.append(f"estimator: height from {source} (was {self.height_source})")
+            self.quality.resets += 1
+            if source == "range":
+                self.terrain_m = 0.0  # heights above the surface from now on
+            self.height_source = source
+        e = self.estimate
+        assert e is not None
+        tilt_cos = float(ekf.rotation(e.quaternion)[2, 2])
+        if range_m is not None and p.rng_ctrl:
+            height = range_m * tilt_cos
+            sd = self._range_sd(range_m)
+            if source == "range":
+                self._fuse("range", ekf.fuse_height(e, height, self.terrain_m, sd, p.gate_sd))
+            else:
+                self._terrain(float(e.position_m[2]) - height, sd, e)
+        if source == "baro" and p.baro_ctrl and self._baro_ref_m is not None:
+            z = pressure_altitude_m(imu.pressure_hpa) - self._baro_ref_m
+            self._fuse("barometer", ekf.fuse_height(
+                self.estimate, z, 0.0, p.baro_noise_m, p.gate_sd
+            ))  # fmt: skip
+
+    def resting(self) -> None:
+        """The vehicle stands on the surface (disarmed, or idling before take-off): the
+        surface is where its height says, to the estimate's precision (PX4 aligns its
+        terrain estimate on the ground the same way)."""
+        e = self.estimate
+        if e is None or self.height_source == "range":
+            return
+        self._terrain(float(e.position_m[2]) - self.resting_height_m, RESTING_SD_M, e)
+
+    def _terrain(self, measured_m: float, sd_m: float, e: ekf.Estimate) -> None:
+        """PX4's terrain estimator: the surface's height under the vehicle, a random walk
+        of TERRAIN_SLOPE per metre flown. An innovation beyond 5 standard deviations is a new
+        surface (a box, a step): the estimate starts over from it."""
+        speed = float(np.hypot(e.velocity_m_s[0], e.velocity_m_s[1]))
+        flown_m = speed * (e.time_us - self._terrain_us) * 1e-6 if self._terrain_us else 0.0
+        self._terrain_us = e.time_us
+        self._terrain_var += (TERRAIN_SLOPE * flown_m) ** 2 + 1e-12
+        var = sd_m * sd_m + float(e.covariance[2, 2])
+        innovation = measured_m - self.terrain_m
+        if innovation * innovation > 25.0 * (self._terrain_var + var):
+            self.terrain_m, self._terrain_var = measured_m, var  # a new surface: start over
+            self.quality.resets += 1
+            return
+        gain = self._terrain_var / (self._terrain_var + var)
+        self.terrain_m += gain * innovation
+        self._terrain_var *= 1.0 - gain
+
+
+def range_reading(step: Step) -> float | None:
+    """The newest downward range: the flow deck's float metres, else DISTANCE_SENSOR's cm."""
+    if "HIL_OPTICAL_FLOW" in step.new and step.latest["HIL_OPTICAL_FLOW"]["distance"] > 0.0:
+        return float(step.latest["HIL_OPTICAL_FLOW"]["distance"])
+    if "DISTANCE_SENSOR" in step.new:
+        d = step.latest["DISTANCE_SENSOR"]
+        if d["min_distance"] <= d["current_distance"] <= d["max_distance"]:
+            return d["current_distance"] * 0.01
+    return None
