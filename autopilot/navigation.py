@@ -36,6 +36,7 @@ SENSOR_SETS = {  # `--sensors NAME`: the parameters of each sensor set
 }
 TERRAIN_SLOPE = 0.005  # m of surface height change per m flown, as the terrain's process noise
 RESTING_SD_M = 0.0005  # how well a standing vehicle knows the surface under it
+BARO_REF_STEPS = 250.0  # the barometer's reference averages its offset over about a second
 HISTORY_STEPS = 64  # 0.26 s at 250 Hz: the oldest delayed measurement that can be fused
 
 
@@ -47,7 +48,17 @@ class EstimatorParams:
     gps_ctrl: int = param(0, lo=0, hi=7, doc="GPS: 1 lat/lon, 2 altitude, 4 velocity")
     of_ctrl: int = param(1, lo=0, hi=1, doc="optical flow: 1 fused while the range is valid")
     rng_ctrl: int = param(
-        1, lo=0, hi=1, doc="range: 1 terrain, and height when it is the reference"
+        1,
+        lo=0,
+        hi=2,
+        doc="range: 1 conditional (terrain; the height while low and slow over a baro or "
+        "GPS reference, PX4's range aid), 2 terrain, and the height when it is the reference",
+    )
+    rng_aid_max_height_m: float = param(
+        0.5, unit="m", lo=0.0, hi=10.0, doc="range aid below this height (hysteresis 20 %)"
+    )
+    rng_aid_max_speed_m_s: float = param(
+        1.0, unit="m/s", lo=0.0, hi=10.0, doc="range aid below this horizontal speed"
     )
     baro_ctrl: int = param(1, lo=0, hi=1, doc="barometer: 1 height when it is the reference")
     hgt_ref: int = param(3, lo=0, hi=3, doc="height reference: 0 baro, 1 GPS, 2 range, 3 vision")
@@ -135,6 +146,11 @@ class Navigation:
         self._terrain_var = 1.0
         self._terrain_us = 0
         self._baro_ref_m: float | None = None
+        self._standing = False  # resting() was told this step
+        self._standing_before = False  # ... and the step before
+        self._aligned_z_m = 0.0  # the height the vehicle was aligned at
+        self._rest_z_m: float | None = None  # the height it stands at
+        self._home_terrain_m = 0.0  # the surface's height where the vehicle last stood
         self.height_source = HEIGHT_NAMES[params.hgt_ref]
         self.range_m: float | None = None
         self.events: list[str] = []
@@ -276,6 +292,7 @@ class Navigation:
             position_sd = 0.01
         self.estimate = ekf.initial(imu.time_us, position, q, position_sd, attitude_sd)
         self._baro_ref_m = pressure_altitude_m(imu.pressure_hpa) - position[2]
+        self._aligned_z_m = float(position[2])
         self._record(imu.time_us)
         self.events.append(
             f"estimator aligned ({', '.join(self.sources())}; height {self.height_source})"
@@ -364,8 +381,9 @@ class Navigation:
         sd = p.of_noise_rad_s * max(height, 0.05)
         self._fuse("optical flow", ekf.fuse_body_velocity(self.estimate, v_flu, sd, p.gate_sd))
 
-    def _height_source(self, t: float) -> str:
-        """The reference if it is alive, else the first live fallback."""
+    def _height_source(self, t: float, range_m: float | None) -> str:
+        """The reference if it is alive, else the first live fallback; over a baro or GPS
+        reference, the range while low and slow (range aid, EKF2_RNG_CTRL 1)."""
         p = self.params
         timeout = p.source_timeout_s
         alive = {
@@ -376,6 +394,13 @@ class Navigation:
             "gps": bool(p.gps_ctrl & GPS_ALT) and t - self._last_seen.get("GPS", -math.inf) <= 1.0,
         }
         wanted = HEIGHT_NAMES[p.hgt_ref]
+        if (
+            wanted in ("baro", "gps")
+            and p.rng_ctrl == 1
+            and alive["range"]
+            and self._aiding(range_m)
+        ):
+            return "range"
         if alive[wanted]:
             return wanted
         for name in ("range", "baro", "gps"):
@@ -383,17 +408,42 @@ class Navigation:
                 return name
         return wanted
 
+    def _aiding(self, range_m: float | None) -> bool:
+        """Range aid's conditions, with hysteresis: in below 80 % of the height limit, out
+        above it (or too fast)."""
+        e = self.estimate
+        assert e is not None
+        if range_m is None:
+            return self.height_source == "range"
+        limit = self.params.rng_aid_max_height_m * (1.0 if self.height_source == "range" else 0.8)
+        speed = float(np.hypot(e.velocity_m_s[0], e.velocity_m_s[1]))
+        return range_m <= limit and speed <= self.params.rng_aid_max_speed_m_s
+
     def _fuse_height(self, imu: Imu, range_m: float | None, t: float) -> None:
         p = self.params
-        source = self._height_source(t)
+        source = self._height_source(t, range_m)
         if source != self.height_source:
             self.events.append(f"estimator: height from {source} (was {self.height_source})")
             self.quality.resets += 1
+            aid = HEIGHT_NAMES[p.hgt_ref] in ("baro", "gps") and p.rng_ctrl == 1
             if source == "range":
-                self.terrain_m = 0.0  # heights above the surface from now on
+                # heights above the surface from now on: under range aid, above the surface
+                # the vehicle stood on (PX4 resets its height to the range's the same way),
+                # so that a low waypoint means its height above the ground, whatever the
+                # barometer drifted on the way
+                self.terrain_m = self._home_terrain_m if aid else 0.0
             self.height_source = source
         e = self.estimate
         assert e is not None
+        # the barometer's reference follows the estimate while something else gives the
+        # height (or the vehicle stands still), averaged over BARO_REF_STEPS: when it takes
+        # over, it does so where the estimate is, without a jump
+        offset = pressure_altitude_m(imu.pressure_hpa) - float(e.position_m[2])
+        if self._baro_ref_m is None:
+            self._baro_ref_m = offset
+        elif source != "baro" or self._standing:
+            self._baro_ref_m += (offset - self._baro_ref_m) / BARO_REF_STEPS
+        self._standing_before, self._standing = self._standing, False
         tilt_cos = float(ekf.rotation(e.quaternion)[2, 2])
         if range_m is not None and p.rng_ctrl:
             height = range_m * tilt_cos
@@ -413,9 +463,20 @@ class Navigation:
         surface is where its height says, to the estimate's precision (PX4 aligns its
         terrain estimate on the ground the same way)."""
         e = self.estimate
-        if e is None or self.height_source == "range":
+        if e is None:
+            return
+        if not self._standing_before:  # come to rest: aligned here, or landed here
+            self._rest_z_m = self._aligned_z_m if self._rest_z_m is None else e.position_m[2]
+        self._standing = True
+        if self.height_source in ("baro", "gps") and self._rest_z_m is not None:
+            # standing still, it does not climb: a barometer's or a fix's noise must not
+            # move it (the barometer's reference meanwhile averages its offset)
+            self._fuse("at rest", ekf.fuse_height(e, self._rest_z_m, 0.0, RESTING_SD_M, 1e3))
+            e = self.estimate
+        if self.height_source == "range":
             return
         self._terrain(float(e.position_m[2]) - self.resting_height_m, RESTING_SD_M, e)
+        self._home_terrain_m = self.terrain_m
 
     def _terrain(self, measured_m: float, sd_m: float, e: ekf.Estimate) -> None:
         """PX4's terrain estimator: the surface's height under the vehicle, a random walk

@@ -9,7 +9,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import yaml
@@ -63,13 +63,16 @@ def run_sitl(
     gcs_urls: list[str],
     location: tuple[float, float, float, float] | None,
     say: Callable[[str], None] = print,
+    sim_options: Sequence[str] = (),
 ) -> int:
     with tempfile.TemporaryDirectory(prefix="groundfx-sitl-") as tmp:
         world_path = (
             located_world(world, location, Path(tmp)) if location else resolve_world_path(world)
         )
         o = load_world(world_path).origin
-        sim, port = start_sim(world_path, speedup=speedup, extra=["--wait"], supervised=True)
+        sim, port = start_sim(
+            world_path, speedup=speedup, extra=["--wait", *sim_options], supervised=True
+        )
         cmd = [
             sys.executable, "-m", "mission.cli", "autopilot",
             "--sim", f"tcp:127.0.0.1:{port}",

@@ -69,6 +69,7 @@ def add_sitl_parser(sub: Any) -> None:
     model_options(p, rho_default=None, model_default=None)
     gcs_options(p)
     p.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
+    add_sensor_options(p)
     add_record_options(p)
     p.set_defaults(func=cmd_sitl)
 
@@ -120,7 +121,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     location = parse_location(args.location) if args.location else None
     options = ["--identity", args.identity, "--params-file", str(args.params_file)]
     options += ["--vehicle", args.vehicle]
-    options += [a for p in args.param for a in ("--param", p)]
+    sim_options, sensor_params = sensor_arguments(args)
+    options += sensor_params + [a for p in args.param for a in ("--param", p)]
     if args.model is not None:
         options += ["--model", args.model]
     if args.rho is not None:
@@ -137,7 +139,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     elif args.record is not None:
         options += ["--record", str(args.record)]
     speedup = "max" if args.speedup is None else f"{args.speedup:g}"
-    return run_sitl(args.world, speedup, options, gcs_urls, location)
+    return run_sitl(args.world, speedup, options, gcs_urls, location, sim_options=sim_options)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:

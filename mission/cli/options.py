@@ -123,6 +123,12 @@ def add_sensor_options(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="sensors without noise, bias or latency (the simulator's truth, on time)",
     )
+    p.add_argument(
+        "--sensor-seed",
+        type=int,
+        metavar="N",
+        help="seed of the sensor errors, overriding the world's sensor_noise.seed",
+    )
 
 
 def sensor_arguments(args: argparse.Namespace) -> tuple[list[str], list[str]]:
@@ -130,5 +136,7 @@ def sensor_arguments(args: argparse.Namespace) -> tuple[list[str], list[str]]:
     from autopilot.navigation import SENSOR_SETS
 
     sim = ["--ideal-sensors"] if args.ideal_sensors else []
+    if args.sensor_seed is not None:
+        sim += ["--sensor-seed", str(args.sensor_seed)]
     params = [a for k, v in SENSOR_SETS[args.sensors].items() for a in ("--param", f"{k}={v}")]
     return sim, params
