@@ -14,6 +14,8 @@ above 1 the measurement is rejected and the state is unchanged.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -55,12 +57,18 @@ class Fused:
     accepted: bool
 
 
+def _floats(v: np.ndarray | tuple[float, ...]) -> list[float]:
+    """Python floats: arithmetic on numpy scalars is several times slower."""
+    return v.tolist() if isinstance(v, np.ndarray) else list(v)
+
+
 def skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    x, y, z = _floats(v)
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def rotation(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q
+    w, x, y, z = _floats(q)
     return np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
@@ -71,8 +79,8 @@ def rotation(q: np.ndarray) -> np.ndarray:
 
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
+    aw, ax, ay, az = _floats(a)
+    bw, bx, by, bz = _floats(b)
     return np.array(
         [
             aw * bw - ax * bx - ay * by - az * bz,
@@ -85,11 +93,12 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def rotation_vector_quat(theta: np.ndarray) -> np.ndarray:
     """The quaternion of a rotation vector (exact)."""
-    angle = float(np.linalg.norm(theta))
+    x, y, z = _floats(theta)
+    angle = math.sqrt(x * x + y * y + z * z)
     if angle < 1e-12:
-        return np.array([1.0, 0.5 * theta[0], 0.5 * theta[1], 0.5 * theta[2]])
+        return np.array([1.0, 0.5 * x, 0.5 * y, 0.5 * z])
     s = math.sin(0.5 * angle) / angle
-    return np.array([math.cos(0.5 * angle), s * theta[0], s * theta[1], s * theta[2]])
+    return np.array([math.cos(0.5 * angle), s * x, s * y, s * z])
 
 
 def initial(
@@ -157,6 +166,109 @@ def matrix_quat(r: np.ndarray) -> np.ndarray:
     return out / np.linalg.norm(out) * (1.0 if out[0] >= 0 else -1.0)
 
 
+def predict_state(
+    est: Estimate, time_us: int, specific_force_body: np.ndarray, rates_body: np.ndarray
+) -> Estimate:
+    """Propagate the state (not its covariance) over the IMU sample that ended at `time_us`
+    (its mean over the period): every control step, as PX4's output predictor does. Written
+    out in floats: a dozen 3-vector operations in numpy cost more than the whole of it."""
+    dt = (time_us - est.time_us) * 1e-6
+    if dt <= 0.0:
+        return est
+    dt = min(dt, 0.1)  # a gap in the IMU stream is not integrated as one long step
+    w0, x0, y0, z0 = est.quaternion.tolist()
+    bax, bay, baz = est.accel_bias_m_s2.tolist()
+    bgx, bgy, bgz = est.gyro_bias_rad_s.tolist()
+    fx, fy, fz = specific_force_body.tolist()
+    fx, fy, fz = fx - bax, fy - bay, fz - baz
+    wx, wy, wz = rates_body.tolist()
+    wx, wy, wz = wx - bgx, wy - bgy, wz - bgz
+    # world acceleration: R(q) f + g
+    ax = (
+        (1 - 2 * (y0 * y0 + z0 * z0)) * fx
+        + 2 * (x0 * y0 - w0 * z0) * fy
+        + 2 * (x0 * z0 + w0 * y0) * fz
+    )
+    ay = (
+        2 * (x0 * y0 + w0 * z0) * fx
+        + (1 - 2 * (x0 * x0 + z0 * z0)) * fy
+        + 2 * (y0 * z0 - w0 * x0) * fz
+    )
+    az = (
+        2 * (x0 * z0 - w0 * y0) * fx + 2 * (y0 * z0 + w0 * x0) * fy
+        + (1 - 2 * (x0 * x0 + y0 * y0)) * fz - GRAVITY_M_S2
+    )  # fmt: skip
+    px, py, pz = est.position_m.tolist()
+    vx, vy, vz = est.velocity_m_s.tolist()
+    h = 0.5 * dt * dt
+    # q * exp(w dt / 2), exactly
+    angle = math.sqrt(wx * wx + wy * wy + wz * wz) * dt
+    if angle < 1e-12:
+        cw, k = 1.0, 0.5 * dt
+    else:
+        cw, k = math.cos(0.5 * angle), math.sin(0.5 * angle) / angle * dt
+    dx, dy, dz = k * wx, k * wy, k * wz
+    qw = w0 * cw - x0 * dx - y0 * dy - z0 * dz
+    qx = w0 * dx + x0 * cw + y0 * dz - z0 * dy
+    qy = w0 * dy - x0 * dz + y0 * cw + z0 * dx
+    qz = w0 * dz + x0 * dy - y0 * dx + z0 * cw
+    n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    return Estimate(
+        time_us=time_us,
+        position_m=np.array((px + vx * dt + h * ax, py + vy * dt + h * ay, pz + vz * dt + h * az)),
+        velocity_m_s=np.array((vx + ax * dt, vy + ay * dt, vz + az * dt)),
+        quaternion=np.array((qw * n, qx * n, qy * n, qz * n)),
+        accel_bias_m_s2=est.accel_bias_m_s2,
+        gyro_bias_rad_s=est.gyro_bias_rad_s,
+        covariance=est.covariance,
+        angular_velocity_body_rad_s=np.array((wx, wy, wz)),
+    )
+
+
+_DIAGONAL = np.arange(3)
+_NOISE_STATES = np.arange(3, 15)
+
+
+def predict_covariance(
+    est: Estimate,
+    dt: float,
+    specific_force_body: np.ndarray,
+    rates_body: np.ndarray,
+    noise: ProcessNoise,
+) -> Estimate:
+    """Propagate the covariance over `dt` with the mean IMU sample of that interval (PX4's
+    EKF2 predicts its covariance at 100 Hz from the accumulated IMU deltas)."""
+    if dt <= 0.0:
+        return est
+    r = rotation(est.quaternion)
+    f = specific_force_body - est.accel_bias_m_s2
+    w = (rates_body - est.gyro_bias_rad_s) * dt
+    fx = np.eye(N_ERRORS)
+    i = _DIAGONAL
+    fx[i, 3 + i] = dt
+    fx[V_, TH_] = -(r @ skew(f)) * dt
+    fx[V_, BA_] = -r * dt
+    fx[TH_, TH_] -= skew(w)  # exp(-[w dt]x) to first order: w dt is milliradians
+    fx[6 + i, 12 + i] = -dt
+    p = fx @ est.covariance @ fx.T
+    p[_NOISE_STATES, _NOISE_STATES] += _process_variances(noise) * dt
+    return dataclasses.replace(est, covariance=p)
+
+
+@functools.lru_cache(maxsize=8)
+def _process_variances(noise: ProcessNoise) -> np.ndarray:
+    """Per unit time, on the velocity, angle, accelerometer- and gyro-bias errors."""
+    return np.repeat(
+        [
+            noise.accel_noise_density**2,
+            noise.gyro_noise_density**2,
+            noise.accel_bias_walk**2,
+            noise.gyro_bias_walk**2,
+        ],
+        3,
+    )
+
+
 def predict(
     est: Estimate,
     time_us: int,
@@ -164,41 +276,25 @@ def predict(
     rates_body: np.ndarray,
     noise: ProcessNoise,
 ) -> Estimate:
-    """Propagate over the IMU sample that ended at `time_us` (its mean over the period)."""
-    dt = (time_us - est.time_us) * 1e-6
+    """State and covariance over one IMU sample."""
+    dt = min((time_us - est.time_us) * 1e-6, 0.1)
     if dt <= 0.0:
         return est
-    dt = min(dt, 0.1)  # a gap in the IMU stream is not integrated as one long step
-    r = rotation(est.quaternion)
-    f = specific_force_body - est.accel_bias_m_s2
-    w = rates_body - est.gyro_bias_rad_s
-    a = r @ f + GRAVITY_WORLD
-    position = est.position_m + est.velocity_m_s * dt + 0.5 * a * dt * dt
-    velocity = est.velocity_m_s + a * dt
-    q = quat_mul(est.quaternion, rotation_vector_quat(w * dt))
-    q /= np.linalg.norm(q)
+    covariance = predict_covariance(est, dt, specific_force_body, rates_body, noise)
+    return predict_state(covariance, time_us, specific_force_body, rates_body)
 
-    fx = np.eye(N_ERRORS)
-    fx[P_, V_] = np.eye(3) * dt
-    fx[V_, TH_] = -(r @ skew(f)) * dt
-    fx[V_, BA_] = -r * dt
-    fx[TH_, TH_] = rotation(rotation_vector_quat(-w * dt))
-    fx[TH_, BG_] = -np.eye(3) * dt
-    p = fx @ est.covariance @ fx.T
-    idx = np.arange(3)
-    p[3 + idx, 3 + idx] += noise.accel_noise_density**2 * dt
-    p[6 + idx, 6 + idx] += noise.gyro_noise_density**2 * dt
-    p[9 + idx, 9 + idx] += noise.accel_bias_walk**2 * dt
-    p[12 + idx, 12 + idx] += noise.gyro_bias_walk**2 * dt
+
+def _updated(est: Estimate, dx: np.ndarray, p_new: np.ndarray) -> Estimate:
+    q = quat_mul(est.quaternion, rotation_vector_quat(dx[TH_]))
     return Estimate(
-        time_us=time_us,
-        position_m=position,
-        velocity_m_s=velocity,
-        quaternion=q,
-        accel_bias_m_s2=est.accel_bias_m_s2,
-        gyro_bias_rad_s=est.gyro_bias_rad_s,
-        covariance=p,
-        angular_velocity_body_rad_s=w,
+        time_us=est.time_us,
+        position_m=est.position_m + dx[P_],
+        velocity_m_s=est.velocity_m_s + dx[V_],
+        quaternion=q / math.sqrt(float(q @ q)),
+        accel_bias_m_s2=est.accel_bias_m_s2 + dx[BA_],
+        gyro_bias_rad_s=est.gyro_bias_rad_s + dx[BG_],
+        covariance=0.5 * (p_new + p_new.T),
+        angular_velocity_body_rad_s=est.angular_velocity_body_rad_s,
     )
 
 
@@ -214,28 +310,24 @@ def correct(
     if not ratio <= 1.0:  # NaN is rejected too
         return Fused(est, ratio, False)
     k = ph @ np.linalg.inv(s)
-    dx = k @ innovation
-    ikh = np.eye(N_ERRORS) - k @ h
-    p_new = ikh @ p @ ikh.T + (k * variance) @ k.T  # Joseph form: stays positive definite
-    q = quat_mul(est.quaternion, rotation_vector_quat(dx[TH_]))
-    q /= np.linalg.norm(q)
-    updated = Estimate(
-        time_us=est.time_us,
-        position_m=est.position_m + dx[P_],
-        velocity_m_s=est.velocity_m_s + dx[V_],
-        quaternion=q,
-        accel_bias_m_s2=est.accel_bias_m_s2 + dx[BA_],
-        gyro_bias_rad_s=est.gyro_bias_rad_s + dx[BG_],
-        covariance=0.5 * (p_new + p_new.T),
-        angular_velocity_body_rad_s=est.angular_velocity_body_rad_s,
-    )
-    return Fused(updated, ratio, True)
+    return Fused(_updated(est, k @ innovation, p - k @ ph.T), ratio, True)
 
 
-def _rows(block: slice, rows: np.ndarray, axes: list[int] | None = None) -> np.ndarray:
-    h = np.zeros((len(rows) if axes is None else len(axes), N_ERRORS))
-    h[:, block] = rows if axes is None else rows[axes]
-    return h
+def correct_states(
+    est: Estimate, innovation: np.ndarray, states: list[int], variance: np.ndarray, gate_sd: float
+) -> Fused:
+    """`correct` for a measurement of error states themselves (h selects `states`): the same
+    update without the products by h."""
+    p = est.covariance
+    ph = p[:, states]
+    s = ph[states, :]
+    m = len(states)
+    s.flat[:: m + 1] += variance
+    ratio = float(np.max(innovation * innovation / (gate_sd * gate_sd * s.flat[:: m + 1])))
+    if not ratio <= 1.0:  # NaN is rejected too
+        return Fused(est, ratio, False)
+    k = ph @ np.linalg.inv(s)
+    return Fused(_updated(est, k @ innovation, p - k @ ph.T), ratio, True)
 
 
 def fuse_position(
@@ -250,13 +342,13 @@ def fuse_position(
     measurement's capture time (a delayed measurement corrects the present state)."""
     axes = [0, 1, 2] if axes is None else axes
     innovation = (measured_m - predicted_m)[axes]
-    return correct(est, innovation, _rows(P_, np.eye(3), axes), sd_m[axes] ** 2, gate_sd)
+    return correct_states(est, innovation, axes, sd_m[axes] ** 2, gate_sd)
 
 
 def fuse_velocity(est: Estimate, measured_m_s: np.ndarray, sd_m_s: float, gate_sd: float) -> Fused:
     """A world-frame velocity (GPS)."""
     innovation = measured_m_s - est.velocity_m_s
-    return correct(est, innovation, _rows(V_, np.eye(3)), np.full(3, sd_m_s**2), gate_sd)
+    return correct_states(est, innovation, [3, 4, 5], np.full(3, sd_m_s**2), gate_sd)
 
 
 def fuse_attitude(
@@ -273,7 +365,39 @@ def fuse_attitude(
     if d[0] < 0.0:
         d = -d
     innovation = 2.0 * d[1:]
-    return correct(est, innovation, _rows(TH_, np.eye(3)), np.full(3, sd_rad**2), gate_sd)
+    return correct_states(est, innovation, [6, 7, 8], np.full(3, sd_rad**2), gate_sd)
+
+
+def yaw_of(q: np.ndarray) -> float:
+    """The heading of a (w, x, y, z) quaternion: the body x axis from world east, ccw."""
+    w, x, y, z = _floats(q)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def fuse_pose(
+    est: Estimate,
+    position_innovation_m: np.ndarray,
+    axes: list[int],
+    position_sd_m: float,
+    yaw_innovation_rad: float | None,
+    yaw_sd_rad: float,
+    gate_sd: float,
+) -> Fused:
+    """A motion-capture pose in one update, as PX4's EKF2 fuses external vision: the position
+    on `axes` (innovations given, each against the filter's position at capture time) and
+    the yaw (roll and pitch come from the accelerometer: a capture system's attitude noise
+    would only add to them)."""
+    rows = len(axes) + (yaw_innovation_rad is not None)
+    h = np.zeros((rows, N_ERRORS))
+    h[np.arange(len(axes)), axes] = 1.0
+    variance = np.full(rows, position_sd_m * position_sd_m)
+    innovation = np.empty(rows)
+    innovation[: len(axes)] = position_innovation_m
+    if yaw_innovation_rad is not None:
+        h[-1, TH_] = rotation(est.quaternion)[2, :]  # a body rotation turns the heading so
+        variance[-1] = yaw_sd_rad * yaw_sd_rad
+        innovation[-1] = (yaw_innovation_rad + math.pi) % (2.0 * math.pi) - math.pi
+    return correct(est, innovation, h, variance, gate_sd)
 
 
 def fuse_heading(
@@ -296,7 +420,7 @@ def fuse_height(
     """A height above the terrain at `terrain_m` (range finder, barometer against its
     reference)."""
     innovation = np.array([height_m - (est.position_m[2] - terrain_m)])
-    return correct(est, innovation, _rows(P_, np.eye(3), [2]), np.array([sd_m**2]), gate_sd)
+    return correct_states(est, innovation, [2], np.array([sd_m**2]), gate_sd)
 
 
 def fuse_body_velocity(

@@ -27,7 +27,7 @@ from simbridge.frames import frd_to_flu, geodetic_to_local, ned_to_enu, quat_ned
 
 HEIGHT_BARO, HEIGHT_GPS, HEIGHT_RANGE, HEIGHT_VISION = 0, 1, 2, 3
 HEIGHT_NAMES = {0: "baro", 1: "gps", 2: "range", 3: "vision"}
-EV_HPOS, EV_VPOS, EV_ATT = 1, 2, 8
+EV_HPOS, EV_VPOS, EV_YAW = 1, 2, 8
 GPS_POS, GPS_ALT, GPS_VEL = 1, 2, 4
 SENSOR_SETS = {  # `--sensors NAME`: the parameters of each sensor set
     "mocap": {"EKF2_EV_CTRL": 11, "EKF2_GPS_CTRL": 0, "EKF2_OF_CTRL": 1, "EKF2_HGT_REF": 3},
@@ -37,16 +37,26 @@ SENSOR_SETS = {  # `--sensors NAME`: the parameters of each sensor set
 TERRAIN_SLOPE = 0.005  # m of surface height change per m flown, as the terrain's process noise
 RESTING_SD_M = 0.0005  # how well a standing vehicle knows the surface under it
 BARO_REF_STEPS = 250.0  # the barometer's reference averages its offset over about a second
+# the covariance's prediction step (PX4's EKF2: 10 ms); a fusion between two uses the last
+# prediction's covariance, short of at most this much process noise
+COVARIANCE_PERIOD_S = 0.01
+SLOW_FUSION_EVERY = 5  # heading, barometer, rest: every fifth control step (50 Hz)
 HISTORY_STEPS = 64  # 0.26 s at 250 Hz: the oldest delayed measurement that can be fused
 
 
 @dataclass(frozen=True)
 class EstimatorParams:
     ev_ctrl: int = param(
-        11, lo=0, hi=15, doc="motion capture: 1 horizontal position, 2 vertical, 8 attitude"
+        11, lo=0, hi=15, doc="motion capture: 1 horizontal position, 2 vertical, 8 yaw"
     )
     gps_ctrl: int = param(0, lo=0, hi=7, doc="GPS: 1 lat/lon, 2 altitude, 4 velocity")
-    of_ctrl: int = param(1, lo=0, hi=1, doc="optical flow: 1 fused while the range is valid")
+    of_ctrl: int = param(
+        1,
+        lo=0,
+        hi=1,
+        doc="optical flow: 1 fused while the range is valid and no motion capture position "
+        "comes (a fallback: beside 1 mm poses at 100 Hz it adds nothing but cost)",
+    )
     rng_ctrl: int = param(
         1,
         lo=0,
@@ -66,7 +76,7 @@ class EstimatorParams:
         5.5, unit="deg", lo=-180.0, hi=180.0, doc="magnetic declination (packaged worlds: 5.5)"
     )
     ev_pos_noise_m: float = param(0.002, unit="m", lo=1e-4, hi=10.0, doc="mocap position sd")
-    ev_att_noise_rad: float = param(0.005, unit="rad", lo=1e-4, hi=1.0, doc="mocap attitude sd")
+    ev_att_noise_rad: float = param(0.005, unit="rad", lo=1e-4, hi=1.0, doc="mocap yaw sd")
     rng_noise_m: float = param(0.003, unit="m", lo=1e-4, hi=1.0, doc="range sd at short range")
     rng_noise_per_m: float = param(0.01, lo=0.0, hi=1.0, doc="range sd added per metre")
     of_noise_rad_s: float = param(0.15, unit="rad/s", lo=1e-3, hi=10.0, doc="flow rate sd")
@@ -140,6 +150,11 @@ class Navigation:
         # (time_us, displacement sum, rotation product) of the predictions alone
         self._history: deque[tuple[int, np.ndarray, np.ndarray]] = deque(maxlen=HISTORY_STEPS)
         self._moved = np.zeros(3)
+        self._steps = 0
+        self._pending_dt = 0.0  # IMU time not yet in the covariance, and its sums
+        self._baro_sum, self._baro_n = 0.0, 0  # barometer innovations since the last fusion
+        self._pending_f = np.zeros(3)
+        self._pending_w = np.zeros(3)
         self._turned = np.array([1.0, 0.0, 0.0, 0.0])
         self._last_seen: dict[str, float] = {}
         self.terrain_m = 0.0
@@ -205,8 +220,15 @@ class Navigation:
             self._initialise(step, imu)
             return
         before = self.estimate
-        self.estimate = ekf.predict(before, imu.time_us, imu.specific_force, imu.rates, self.noise)
+        self.estimate = ekf.predict_state(before, imu.time_us, imu.specific_force, imu.rates)
         dt = (self.estimate.time_us - before.time_us) * 1e-6
+        self._steps += 1
+        # the covariance follows at COVARIANCE_PERIOD_S from the IMU's mean over the interval
+        self._pending_dt += dt
+        self._pending_f += imu.specific_force * dt
+        self._pending_w += imu.rates * dt
+        if self._pending_dt >= COVARIANCE_PERIOD_S:
+            self._sync()
         self._moved = self._moved + (self.estimate.position_m - before.position_m)
         turn = ekf.rotation_vector_quat(self.estimate.angular_velocity_body_rad_s * dt)
         turned = ekf.quat_mul(self._turned, turn)
@@ -221,11 +243,19 @@ class Navigation:
         self.range_m = range_m
         if range_m is not None:
             self._last_seen["range"] = t
-        if not (p.ev_ctrl & EV_ATT and self._alive("motion capture", t)) and imu.field.any():
+        if (
+            self._steps % SLOW_FUSION_EVERY == 0
+            and not (p.ev_ctrl & EV_YAW and self._alive("motion capture", t))
+            and imu.field.any()
+        ):
             self._fuse("heading", ekf.fuse_heading(
                 self.estimate, imu.field, self._field_world(), p.mag_noise_rad, p.gate_sd
             ))  # fmt: skip
-        if p.of_ctrl and "HIL_OPTICAL_FLOW" in step.new:
+        if (
+            p.of_ctrl
+            and "HIL_OPTICAL_FLOW" in step.new
+            and not (p.ev_ctrl & EV_HPOS and self._alive("motion capture", t))
+        ):
             self._fuse_flow(step.latest["HIL_OPTICAL_FLOW"], imu, t)
         self._fuse_height(imu, range_m, t)
 
@@ -250,6 +280,19 @@ class Navigation:
         back = ekf.quat_mul(now[2] * np.array([1.0, -1.0, -1.0, -1.0]), then[2])
         return position, ekf.quat_mul(e.quaternion, back)
 
+    def _sync(self) -> None:
+        """The covariance brought up to the present state's time."""
+        dt = self._pending_dt
+        if dt <= 0.0:
+            return
+        assert self.estimate is not None
+        self.estimate = ekf.predict_covariance(
+            self.estimate, min(dt, 0.1), self._pending_f / dt, self._pending_w / dt, self.noise
+        )
+        self._pending_dt = 0.0
+        self._pending_f = np.zeros(3)
+        self._pending_w = np.zeros(3)
+
     def _fuse(self, source: str, fused: ekf.Fused) -> bool:
         self.quality.note(source, fused)
         self.estimate = fused.estimate
@@ -269,7 +312,7 @@ class Navigation:
             return  # wait for the first pose
         if p.gps_ctrl & GPS_POS and gps is None:
             return
-        if mocap is not None and p.ev_ctrl & EV_ATT:
+        if mocap is not None and p.ev_ctrl & EV_YAW:
             q = np.array(quat_ned_frd_to_enu_flu(tuple(mocap["q"])))
             attitude_sd = p.ev_att_noise_rad
         else:
@@ -311,7 +354,7 @@ class Navigation:
             names.append("range")
         if p.baro_ctrl and p.hgt_ref == HEIGHT_BARO:
             names.append("barometer")
-        if not p.ev_ctrl & EV_ATT:
+        if not p.ev_ctrl & EV_YAW:
             names.append("magnetometer")
         return names
 
@@ -325,14 +368,17 @@ class Navigation:
         axes = ([0, 1] if p.ev_ctrl & EV_HPOS else []) + (
             [2] if p.ev_ctrl & EV_VPOS and self.height_source == "vision" else []
         )
-        if axes:
-            sd = np.full(3, p.ev_pos_noise_m)
-            fused = ekf.fuse_position(self.estimate, measured, position, sd, p.gate_sd, axes)
-            self._fuse("motion capture position", fused)
-        if p.ev_ctrl & EV_ATT:
-            q = np.array(quat_ned_frd_to_enu_flu(tuple(m["q"])))
-            fused = ekf.fuse_attitude(self.estimate, q, attitude, p.ev_att_noise_rad, p.gate_sd)
-            self._fuse("motion capture attitude", fused)
+        yaw = None
+        if p.ev_ctrl & EV_YAW:
+            q = quat_ned_frd_to_enu_flu(tuple(m["q"]))
+            yaw = ekf.yaw_of(np.array(q)) - ekf.yaw_of(attitude)
+        if axes or yaw is not None:
+            innovation = (measured - position)[axes]
+            fused = ekf.fuse_pose(
+                self.estimate, innovation, axes, p.ev_pos_noise_m, yaw, p.ev_att_noise_rad,
+                p.gate_sd,
+            )  # fmt: skip
+            self._fuse("motion capture", fused)
 
     def _gps_position(self, g: dict) -> tuple[float, float, float]:
         o = self.origin
@@ -449,14 +495,23 @@ class Navigation:
             height = range_m * tilt_cos
             sd = self._range_sd(range_m)
             if source == "range":
-                self._fuse("range", ekf.fuse_height(e, height, self.terrain_m, sd, p.gate_sd))
+                fused = ekf.fuse_height(self.estimate, height, self.terrain_m, sd, p.gate_sd)
+                self._fuse("range", fused)
             else:
                 self._terrain(float(e.position_m[2]) - height, sd, e)
         if source == "baro" and p.baro_ctrl and self._baro_ref_m is not None:
-            z = pressure_altitude_m(imu.pressure_hpa) - self._baro_ref_m
-            self._fuse("barometer", ekf.fuse_height(
-                self.estimate, z, 0.0, p.baro_noise_m, p.gate_sd
-            ))  # fmt: skip
+            # the mean of the readings since the last fusion, against the present height
+            # less what it climbed since (the velocity's integral): fused at 50 Hz
+            self._baro_sum += (
+                pressure_altitude_m(imu.pressure_hpa) - self._baro_ref_m - float(e.position_m[2])
+            )
+            self._baro_n += 1
+            if self._steps % SLOW_FUSION_EVERY == 0:
+                z = float(self.estimate.position_m[2]) + self._baro_sum / self._baro_n
+                self._fuse("barometer", ekf.fuse_height(
+                    self.estimate, z, 0.0, p.baro_noise_m, p.gate_sd
+                ))  # fmt: skip
+                self._baro_sum, self._baro_n = 0.0, 0
 
     def resting(self) -> None:
         """The vehicle stands on the surface (disarmed, or idling before take-off): the
@@ -468,7 +523,12 @@ class Navigation:
         if not self._standing_before:  # come to rest: aligned here, or landed here
             self._rest_z_m = self._aligned_z_m if self._rest_z_m is None else e.position_m[2]
         self._standing = True
-        if self.height_source in ("baro", "gps") and self._rest_z_m is not None:
+        if (
+            self.height_source in ("baro", "gps")
+            and self._rest_z_m is not None
+            and self._steps % SLOW_FUSION_EVERY == 0
+        ):
+            e = self.estimate
             # standing still, it does not climb: a barometer's or a fix's noise must not
             # move it (the barometer's reference meanwhile averages its offset)
             self._fuse("at rest", ekf.fuse_height(e, self._rest_z_m, 0.0, RESTING_SD_M, 1e3))

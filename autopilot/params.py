@@ -222,6 +222,7 @@ class ParamStore:
     def __init__(self, path: Path | None, overrides: dict[str, float] | None = None) -> None:
         self.path = path
         self.values = {name: float32(spec.default) for name, spec in SPECS.items()}
+        self._groups: dict[str, tuple[dict[str, float], Any]] = {}
         self.saved: dict[str, float] = {}
         if path is not None and path.exists():
             self.saved = self._read(path)
@@ -265,7 +266,16 @@ class ParamStore:
         return None
 
     def group(self, group: str) -> Any:
-        """The settings dataclass of `group` with the current values."""
+        """The settings dataclass of `group` with the current values (built again only when
+        a value changed: the flight loop asks for some every step)."""
+        cached = self._groups.get(group)
+        if cached is not None and cached[0] == self.values:
+            return cached[1]
+        settings = self._build(group)
+        self._groups[group] = (dict(self.values), settings)
+        return settings
+
+    def _build(self, group: str) -> Any:
         cls = GROUPS[group]
         values: dict[str, Any] = {}
         for name, (g, field_name) in NAMES.items():

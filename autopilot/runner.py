@@ -222,7 +222,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     n_max = vehicle.max_rotor_speed_rad_s
     tuning = Tuning(config)
     rows: list[tuple[float, ...]] = []
-    timings: list[float] = []
+    timings: list[float] = []  # controller and ground-effect model, per step
+    step_timings: list[float] = []  # the same with the estimator's update before it
     ge_pairs: list[tuple[float, float, float]] = []  # (height, predicted, true) vertical GE
     speeds = (0.0, 0.0, 0.0, 0.0)
     ge = (0.0, 0.0, 0.0)
@@ -281,7 +282,9 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             step = link.receive_step()
             t_us = step.sensor["time_usec"]
             t = t_us * 1e-6
+            t_nav = time.perf_counter()
             nav.update(step)
+            nav_s = time.perf_counter() - t_nav
             if not nav.ready:  # aligning: the first pose or fix has not come yet
                 link.send(t_us, (0.0, 0.0, 0.0, 0.0), channels, False)
                 continue
@@ -398,6 +401,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 )
                 last_setpoint_z = cmd.setpoint.position_m[2]
                 timings.append(time.perf_counter() - t0)
+                step_timings.append(timings[-1] + nav_s)
                 truth = step.latest.get("DEBUG_VECT")
                 if airborne and truth is not None:
                     ge_pairs.append((height, target[2], truth["z"]))
@@ -493,6 +497,11 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         summary.update(
             controller_us_p50=float(np.percentile(us, 50)),
             controller_us_p99=float(np.percentile(us, 99)),
+        )
+        us = np.asarray(step_timings) * 1e6
+        summary.update(
+            estimator_controller_us_p50=float(np.percentile(us, 50)),
+            estimator_controller_us_p99=float(np.percentile(us, 99)),
         )
     summary.update(
         model=tuning.model.name,

@@ -35,6 +35,8 @@ def bench_sitl(world: str = "default", repeat: int = 3) -> dict[str, Any]:
         "rtf",
         "controller_us_p50",
         "controller_us_p99",
+        "estimator_controller_us_p50",
+        "estimator_controller_us_p99",
         "sim_s",
         "wall_s",
         "steps",
