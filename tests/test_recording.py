@@ -144,7 +144,7 @@ def test_the_estimators_error_against_the_truth_and_its_test_ratios_are_recorded
     assert np.median(position[:, 0]) < 0.005  # motion capture: millimetres
     assert np.max(attitude[:, 0]) < 2.0
     assert summary["est_position_rms_m"] < 0.005
-    _, ratio = recording.scalars("plots/estimator/test_ratio/motion_capture_position")
+    _, ratio = recording.scalars("plots/estimator/test_ratio/motion_capture")
     assert len(ratio) > 100 and np.all(ratio[:, 0] < 1.0)  # nothing rejected in a calm flight
 
 
