@@ -103,12 +103,10 @@ def integrate(
     dt_s: float,
     params: ControllerParams,
     frozen: bool,
-    frozen_vertical: bool = False,
 ) -> Vec3:
     """The integral term after one step: k_i times the PD term added unless `frozen` (on the
-    ground, or the last command saturated: anti-windup), clamped to the limit;
-    `frozen_vertical` holds the vertical part only (landing: the setpoint sinks below a
-    vehicle the ground holds up, and the horizontal part still flies out a lateral error)."""
+    ground, in ground contact, or the last command saturated: anti-windup), clamped to the
+    limit."""
     if frozen or params.position_i == 0.0 or dt_s <= 0.0:
         return integral_m_s2
     k, lim = params.position_i * dt_s, params.integral_limit_m_s2
@@ -116,7 +114,7 @@ def integrate(
     return (
         min(max(i[0] + k * pd_m_s2[0], -lim), lim),
         min(max(i[1] + k * pd_m_s2[1], -lim), lim),
-        i[2] if frozen_vertical else min(max(i[2] + k * pd_m_s2[2], -lim), lim),
+        min(max(i[2] + k * pd_m_s2[2], -lim), lim),
     )
 
 

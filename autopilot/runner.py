@@ -380,8 +380,9 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 output = control(state, cmd.setpoint, ge, vehicle, tuning.controller, integral)
                 speeds = output.rotor_speeds_rad_s
                 # anti-windup: not on the ground (but while taking off: a vehicle heavier than
-                # its file must wind the integral up to leave it), in contact or saturated;
-                # while landing, horizontally only
+                # its file must wind the integral up to leave it), in contact or saturated.
+                # While landing it runs: a vehicle held up by a force its model lacks must
+                # wind it down to come down (PX4's integrators run until ground contact)
                 frozen = (
                     cmd_state.phase not in RECORDED_PHASES
                     or (
@@ -397,7 +398,6 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                     t - last_t,
                     tuning.controller,
                     frozen,
-                    frozen_vertical=cmd_state.phase == Phase.LANDING,
                 )
                 last_setpoint_z = cmd.setpoint.position_m[2]
                 timings.append(time.perf_counter() - t0)
