@@ -293,6 +293,13 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             state = nav.state()
             height = nav.height_m()
             actual = true_state(step, config.origin) or state
+            # the log and the recording are for evaluation: the truth, and the true height
+            # above the surface (without the simulator's ALTITUDE: over the terrain found)
+            true_height = (
+                step.latest["ALTITUDE"]["bottom_clearance"]
+                if "ALTITUDE" in step.latest
+                else actual.position_m[2] - nav.terrain_m
+            )
             wall = time.monotonic()
             inp = StepInput(t, wall, state, height, resting_height, nav.position_lost(t))
             if not rows and config.mission:
@@ -343,7 +350,9 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             )
             cmd_state = cmd.state
             airborne = height > resting_height + AIRBORNE_MARGIN_M
-            if config.on_step is not None and airborne and cmd_state.phase in RECORDED_PHASES:
+            # the flight log's rows: in the air by the truth, as the recording's reader judges
+            truly_airborne = true_height > resting_height + AIRBORNE_MARGIN_M
+            if config.on_step is not None and truly_airborne and cmd_state.phase in RECORDED_PHASES:
                 config.on_step(t, step, actual, speeds)
             sample_hz = config.record_hz or online.sample_hz
             if (
@@ -417,13 +426,6 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             if airborne and cmd_state.phase in RECORDED_PHASES:
                 nav_errors.append(estimation_error(state, actual))
             recorder.estimator(t, estimation_error(state, actual), nav.quality.this_step)
-            # the log and the recording are for evaluation: the truth, and the true height
-            # above the surface (without the simulator's ALTITUDE: over the terrain found)
-            true_height = (
-                step.latest["ALTITUDE"]["bottom_clearance"]
-                if "ALTITUDE" in step.latest
-                else actual.position_m[2] - nav.terrain_m
-            )
             recorder.step(
                 t,
                 step,

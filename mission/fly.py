@@ -175,6 +175,16 @@ def _fly_with(
     }
 
 
+def _declared(summary: dict[str, Any]) -> str:
+    """When the land detector declared the touchdown, against the true contact."""
+    declared, contact = summary.get("touchdown_declared_s"), summary.get("touchdown_time_s")
+    if declared is None:
+        return "never"
+    if contact is None:
+        return f"at {declared:.2f} s"
+    return f"{declared - contact:+.2f} s from contact"
+
+
 def describe(summary: dict[str, Any]) -> str:
     """The summary for people."""
 
@@ -190,10 +200,17 @@ def describe(summary: dict[str, Any]) -> str:
             f"  z error holding near ground {fmt('hold_z_rms_error_m', 'mm', 1000, 2)} RMS, "
             f"{fmt('hold_z_max_error_m', 'mm', 1000, 2)} max",
             f"  touchdown vertical speed    {fmt('touchdown_speed_m_s', 'm/s', 1, 3)}, "
-            f"bounce {fmt('bounce_m', 'mm', 1000, 2)}",
+            f"bounce {fmt('bounce_m', 'mm', 1000, 2)}; declared {_declared(summary)}",
+            f"  estimator against truth     position {fmt('est_position_rms_m', 'mm', 1000, 2)}"
+            f" RMS ({fmt('est_position_max_m', 'mm', 1000, 2)} max), velocity "
+            f"{fmt('est_velocity_rms_m_s', 'm/s', 1, 3)}, attitude "
+            f"{fmt('est_attitude_rms_deg', 'deg', 1, 2)} RMS; height from "
+            f"{summary.get('estimator_height_source', 'n/a')}",
+            *[f"  {text}" for text in summary.get("failsafes") or []],
             f"  simulated {fmt('sim_s', 's', 1, 2)} in {fmt('wall_s', 's', 1, 2)} wall: "
-            f"{fmt('rtf', 'x real time')}; controller {fmt('controller_us_p50', 'us')} p50, "
-            f"{fmt('controller_us_p99', 'us')} p99",
+            f"{fmt('rtf', 'x real time')}; estimator and controller "
+            f"{fmt('estimator_controller_us_p50', 'us')} p50, "
+            f"{fmt('estimator_controller_us_p99', 'us')} p99",
             f"  {summary['simulator']}",
             *([f"  recording: {summary['recording']}"] if summary.get("recording") else []),
         ]
