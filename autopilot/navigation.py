@@ -21,9 +21,11 @@ import numpy as np
 
 from autopilot import estimator as ekf
 from autopilot.controller import FlightState
+from autopilot.sensors import Imu, imu_from, pressure_altitude_m, range_reading
 from autopilot.simlink import Step
+from autopilot.terrain import Terrain, terrain_update
 from simbridge.config import param
-from simbridge.frames import frd_to_flu, geodetic_to_local, ned_to_enu, quat_ned_frd_to_enu_flu
+from simbridge.frames import geodetic_to_local, ned_to_enu, quat_ned_frd_to_enu_flu
 
 HEIGHT_BARO, HEIGHT_GPS, HEIGHT_RANGE, HEIGHT_VISION = 0, 1, 2, 3
 HEIGHT_NAMES = {0: "baro", 1: "gps", 2: "range", 3: "vision"}
@@ -34,7 +36,6 @@ SENSOR_SETS = {  # `--sensors NAME`: the parameters of each sensor set
     "flow": {"EKF2_EV_CTRL": 0, "EKF2_GPS_CTRL": 0, "EKF2_OF_CTRL": 1, "EKF2_HGT_REF": 2},
     "gps": {"EKF2_EV_CTRL": 0, "EKF2_GPS_CTRL": 7, "EKF2_OF_CTRL": 0, "EKF2_HGT_REF": 0},
 }
-TERRAIN_SLOPE = 0.005  # m of surface height change per m flown, as the terrain's process noise
 RESTING_SD_M = 0.0005  # how well a standing vehicle knows the surface under it
 BARO_REF_STEPS = 250.0  # the barometer's reference averages its offset over about a second
 # the covariance's prediction step (PX4's EKF2: 10 ms); a fusion between two uses the last
@@ -90,31 +91,6 @@ class EstimatorParams:
     )
 
 
-@dataclass(frozen=True)
-class Imu:
-    time_us: int
-    specific_force: np.ndarray  # body FLU, m/s^2
-    rates: np.ndarray  # body FLU, rad/s
-    field: np.ndarray  # body FLU, gauss
-    pressure_hpa: float
-
-
-def imu_from(step: Step) -> Imu:
-    s = step.sensor
-    return Imu(
-        time_us=s["time_usec"],
-        specific_force=np.array(frd_to_flu((s["xacc"], s["yacc"], s["zacc"]))),
-        rates=np.array(frd_to_flu((s["xgyro"], s["ygyro"], s["zgyro"]))),
-        field=np.array(frd_to_flu((s["xmag"], s["ymag"], s["zmag"]))),
-        pressure_hpa=s["abs_pressure"],
-    )
-
-
-def pressure_altitude_m(pressure_hpa: float) -> float:
-    """The international standard atmosphere's altitude of a pressure (troposphere)."""
-    return (1.0 - (pressure_hpa / 1013.25) ** (1.0 / 5.25588)) / 2.25577e-5
-
-
 @dataclass
 class Quality:
     """Innovation test ratios (largest seen, last) and counts per source, for the summary."""
@@ -157,9 +133,7 @@ class Navigation:
         self._pending_w = np.zeros(3)
         self._turned = np.array([1.0, 0.0, 0.0, 0.0])
         self._last_seen: dict[str, float] = {}
-        self.terrain_m = 0.0
-        self._terrain_var = 1.0
-        self._terrain_us = 0
+        self.terrain = Terrain()
         self._baro_ref_m: float | None = None
         self._standing = False  # resting() was told this step
         self._standing_before = False  # ... and the step before
@@ -196,6 +170,11 @@ class Navigation:
         """Centre of mass above the surface below."""
         assert self.estimate is not None
         return float(self.estimate.position_m[2]) - self.terrain_m
+
+    @property
+    def terrain_m(self) -> float:
+        """The estimated height of the surface below (world z)."""
+        return self.terrain.height_m
 
     def position_lost(self, t: float) -> str | None:
         """Why the horizontal position is no longer measured (a configured position source
@@ -477,7 +456,7 @@ class Navigation:
                 # the vehicle stood on (PX4 resets its height to the range's the same way),
                 # so that a low waypoint means its height above the ground, whatever the
                 # barometer drifted on the way
-                self.terrain_m = self._home_terrain_m if aid else 0.0
+                self.terrain = Terrain(self._home_terrain_m if aid else 0.0)
             self.height_source = source
         e = self.estimate
         assert e is not None
@@ -536,33 +515,10 @@ class Navigation:
         if self.height_source == "range":
             return
         self._terrain(float(e.position_m[2]) - self.resting_height_m, RESTING_SD_M, e)
-        self._home_terrain_m = self.terrain_m
+        self._home_terrain_m = self.terrain.height_m
 
     def _terrain(self, measured_m: float, sd_m: float, e: ekf.Estimate) -> None:
-        """PX4's terrain estimator: the surface's height under the vehicle, a random walk
-        of TERRAIN_SLOPE per metre flown. An innovation beyond 5 standard deviations is a new
-        surface (a box, a step): the estimate starts over from it."""
         speed = float(np.hypot(e.velocity_m_s[0], e.velocity_m_s[1]))
-        flown_m = speed * (e.time_us - self._terrain_us) * 1e-6 if self._terrain_us else 0.0
-        self._terrain_us = e.time_us
-        self._terrain_var += (TERRAIN_SLOPE * flown_m) ** 2 + 1e-12
-        var = sd_m * sd_m + float(e.covariance[2, 2])
-        innovation = measured_m - self.terrain_m
-        if innovation * innovation > 25.0 * (self._terrain_var + var):
-            self.terrain_m, self._terrain_var = measured_m, var  # a new surface: start over
-            self.quality.resets += 1
-            return
-        gain = self._terrain_var / (self._terrain_var + var)
-        self.terrain_m += gain * innovation
-        self._terrain_var *= 1.0 - gain
-
-
-def range_reading(step: Step) -> float | None:
-    """The newest downward range: the flow deck's float metres, else DISTANCE_SENSOR's cm."""
-    if "HIL_OPTICAL_FLOW" in step.new and step.latest["HIL_OPTICAL_FLOW"]["distance"] > 0.0:
-        return float(step.latest["HIL_OPTICAL_FLOW"]["distance"])
-    if "DISTANCE_SENSOR" in step.new:
-        d = step.latest["DISTANCE_SENSOR"]
-        if d["min_distance"] <= d["current_distance"] <= d["max_distance"]:
-            return d["current_distance"] * 0.01
-    return None
+        variance = sd_m * sd_m + float(e.covariance[2, 2])
+        self.terrain, reset = terrain_update(self.terrain, measured_m, variance, speed, e.time_us)
+        self.quality.resets += reset

@@ -1,0 +1,46 @@
+"""The sensors' readings out of the HIL messages, in the autopilot's frames and units."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from autopilot.simlink import Step
+from simbridge.frames import frd_to_flu
+
+
+@dataclass(frozen=True)
+class Imu:
+    time_us: int
+    specific_force: np.ndarray  # body FLU, m/s^2
+    rates: np.ndarray  # body FLU, rad/s
+    field: np.ndarray  # body FLU, gauss
+    pressure_hpa: float
+
+
+def imu_from(step: Step) -> Imu:
+    s = step.sensor
+    return Imu(
+        time_us=s["time_usec"],
+        specific_force=np.array(frd_to_flu((s["xacc"], s["yacc"], s["zacc"]))),
+        rates=np.array(frd_to_flu((s["xgyro"], s["ygyro"], s["zgyro"]))),
+        field=np.array(frd_to_flu((s["xmag"], s["ymag"], s["zmag"]))),
+        pressure_hpa=s["abs_pressure"],
+    )
+
+
+def pressure_altitude_m(pressure_hpa: float) -> float:
+    """The international standard atmosphere's altitude of a pressure (troposphere)."""
+    return (1.0 - (pressure_hpa / 1013.25) ** (1.0 / 5.25588)) / 2.25577e-5
+
+
+def range_reading(step: Step) -> float | None:
+    """The newest downward range: the flow deck's float metres, else DISTANCE_SENSOR's cm."""
+    if "HIL_OPTICAL_FLOW" in step.new and step.latest["HIL_OPTICAL_FLOW"]["distance"] > 0.0:
+        return float(step.latest["HIL_OPTICAL_FLOW"]["distance"])
+    if "DISTANCE_SENSOR" in step.new:
+        d = step.latest["DISTANCE_SENSOR"]
+        if d["min_distance"] <= d["current_distance"] <= d["max_distance"]:
+            return d["current_distance"] * 0.01
+    return None
