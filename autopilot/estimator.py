@@ -387,17 +387,32 @@ def fuse_pose(
     on `axes` (innovations given, each against the filter's position at capture time) and
     the yaw (roll and pitch come from the accelerometer: a capture system's attitude noise
     would only add to them)."""
-    rows = len(axes) + (yaw_innovation_rad is not None)
-    h = np.zeros((rows, N_ERRORS))
-    h[np.arange(len(axes)), axes] = 1.0
-    variance = np.full(rows, position_sd_m * position_sd_m)
-    innovation = np.empty(rows)
-    innovation[: len(axes)] = position_innovation_m
-    if yaw_innovation_rad is not None:
-        h[-1, TH_] = rotation(est.quaternion)[2, :]  # a body rotation turns the heading so
-        variance[-1] = yaw_sd_rad * yaw_sd_rad
-        innovation[-1] = (yaw_innovation_rad + math.pi) % (2.0 * math.pi) - math.pi
-    return correct(est, innovation, h, variance, gate_sd)
+    if yaw_innovation_rad is None:
+        variance = np.full(len(axes), position_sd_m * position_sd_m)
+        return correct_states(est, position_innovation_m, axes, variance, gate_sd)
+    # h: the position axes' rows select states; the yaw row is R's last row on the angle
+    # error (a body rotation turns the heading by (R dtheta)_z). The products with h written
+    # out: this runs at the capture system's rate.
+    k = len(axes)
+    p = est.covariance
+    hy = rotation(est.quaternion)[2, :]
+    ph = np.empty((N_ERRORS, k + 1))
+    ph[:, :k] = p[:, axes]
+    ph[:, k] = p[:, TH_] @ hy
+    s = np.empty((k + 1, k + 1))
+    s[:k, :] = ph[axes, :]
+    s[k, :] = hy @ ph[TH_, :]
+    variance = np.full(k + 1, position_sd_m * position_sd_m)
+    variance[k] = yaw_sd_rad * yaw_sd_rad
+    s.flat[:: k + 2] += variance
+    innovation = np.empty(k + 1)
+    innovation[:k] = position_innovation_m
+    innovation[k] = (yaw_innovation_rad + math.pi) % (2.0 * math.pi) - math.pi
+    ratio = float(np.max(innovation * innovation / (gate_sd * gate_sd * s.flat[:: k + 2])))
+    if not ratio <= 1.0:
+        return Fused(est, ratio, False)
+    gain = ph @ np.linalg.inv(s)
+    return Fused(_updated(est, gain @ innovation, p - gain @ ph.T), ratio, True)
 
 
 def fuse_heading(
