@@ -145,6 +145,8 @@ NAMES: dict[str, tuple[str, str]] = {
     "EKF2_EVA_NOISE": ("estimator", "ev_att_noise_rad"),
     "EKF2_RNG_NOISE": ("estimator", "rng_noise_m"),
     "EKF2_RNG_SFE": ("estimator", "rng_noise_per_m"),
+    "EKF2_RNG_A_HMAX": ("estimator", "rng_aid_max_height_m"),
+    "EKF2_RNG_A_VMAX": ("estimator", "rng_aid_max_speed_m_s"),
     "EKF2_OF_N_MIN": ("estimator", "of_noise_rad_s"),
     "EKF2_GPS_P_NOISE": ("estimator", "gps_pos_noise_m"),
     "EKF2_GPS_V_NOISE": ("estimator", "gps_vel_noise_m_s"),
