@@ -114,3 +114,21 @@ def make_model(
             load_model(network if network is not None else default_network(rho))
         )
     raise ConfigError(f"--model: unknown model {name!r}; choose one of {', '.join(MODEL_NAMES)}")
+
+
+def fixed_point_step(previous: Vec3, target: Vec3, rotor_thrust_n: float) -> Vec3:
+    """The next ground-effect estimate, from the model's value at the last rotor speeds.
+
+    The estimate depends on the rotor speeds it helps choose: a fixed point. Fed straight
+    back (next = target) the iteration has slope -G, G = f_ge / T, and diverges once the
+    ground effect exceeds the thrust causing it (rho = 2 below 2.5 cm). Moving a fraction
+    1 / (1 + G) of the way gives slope 0 for an effect proportional to thrust, as equation
+    3.4 is: the fixed point in one step, and no lag where G is small.
+    """
+    gain = max(target[2], 0.0) / rotor_thrust_n if rotor_thrust_n > 0.0 else 0.0
+    beta = 1.0 / (1.0 + gain)
+    return (
+        previous[0] + beta * (target[0] - previous[0]),
+        previous[1] + beta * (target[1] - previous[1]),
+        previous[2] + beta * (target[2] - previous[2]),
+    )

@@ -66,7 +66,7 @@ def ground_contact(
 class LandDetector:
     since_s: float | None = None  # contact seen continuously since
 
-    def step(self, time_s: float, contact: bool, params: LandDetectorParams) -> LandDetector:
+    def step(self, time_s: float, contact: bool) -> LandDetector:
         if not contact:
             return LandDetector(None)
         return LandDetector(self.since_s if self.since_s is not None else time_s)

@@ -5,7 +5,7 @@ magnetometer and barometer; ODOMETRY from motion capture; HIL_GPS; the downward 
 HIL_OPTICAL_FLOW). HIL_STATE_QUATERNION, the simulator's truth, is never read here.
 
 Which sensors correct the filter is chosen by parameters named as PX4's EKF2 names them
-(`EstimatorParams`). The height reference (EKF2_HGT_REF) falls back, when its source goes
+(`autopilot.estimator_params`). The height reference (EKF2_HGT_REF) falls back, when its source goes
 quiet, to the next available of range, barometer, GPS. A downward range reading also feeds
 a one-state terrain estimate (PX4's terrain estimator), so the height above the surface
 below (the ground-effect model's input) is the estimated altitude minus the terrain's.
@@ -21,21 +21,22 @@ import numpy as np
 
 from autopilot import estimator as ekf
 from autopilot.controller import FlightState
+from autopilot.estimator_params import (
+    EV_HPOS,
+    EV_VPOS,
+    EV_YAW,
+    GPS_ALT,
+    GPS_POS,
+    GPS_VEL,
+    HEIGHT_BARO,
+    HEIGHT_NAMES,
+    EstimatorParams,
+)
 from autopilot.sensors import Imu, imu_from, pressure_altitude_m, range_reading
 from autopilot.simlink import Step
 from autopilot.terrain import Terrain, terrain_update
-from simbridge.config import param
 from simbridge.frames import geodetic_to_local, ned_to_enu, quat_ned_frd_to_enu_flu
 
-HEIGHT_BARO, HEIGHT_GPS, HEIGHT_RANGE, HEIGHT_VISION = 0, 1, 2, 3
-HEIGHT_NAMES = {0: "baro", 1: "gps", 2: "range", 3: "vision"}
-EV_HPOS, EV_VPOS, EV_YAW = 1, 2, 8
-GPS_POS, GPS_ALT, GPS_VEL = 1, 2, 4
-SENSOR_SETS = {  # `--sensors NAME`: the parameters of each sensor set
-    "mocap": {"EKF2_EV_CTRL": 11, "EKF2_GPS_CTRL": 0, "EKF2_OF_CTRL": 1, "EKF2_HGT_REF": 3},
-    "flow": {"EKF2_EV_CTRL": 0, "EKF2_GPS_CTRL": 0, "EKF2_OF_CTRL": 1, "EKF2_HGT_REF": 2},
-    "gps": {"EKF2_EV_CTRL": 0, "EKF2_GPS_CTRL": 7, "EKF2_OF_CTRL": 0, "EKF2_HGT_REF": 0},
-}
 RESTING_SD_M = 0.0005  # how well a standing vehicle knows the surface under it
 BARO_REF_STEPS = 250.0  # the barometer's reference averages its offset over about a second
 # the covariance's prediction step (PX4's EKF2: 10 ms); a fusion between two uses the last
@@ -45,52 +46,6 @@ SLOW_FUSION_EVERY = 5  # heading, barometer, rest: every fifth control step (50 
 HISTORY_STEPS = 64  # 0.26 s at 250 Hz: the oldest delayed measurement that can be fused
 
 
-@dataclass(frozen=True)
-class EstimatorParams:
-    ev_ctrl: int = param(
-        11, lo=0, hi=15, doc="motion capture: 1 horizontal position, 2 vertical, 8 yaw"
-    )
-    gps_ctrl: int = param(0, lo=0, hi=7, doc="GPS: 1 lat/lon, 2 altitude, 4 velocity")
-    of_ctrl: int = param(
-        1,
-        lo=0,
-        hi=1,
-        doc="optical flow: 1 fused while the range is valid and no motion capture position "
-        "comes (a fallback: beside 1 mm poses at 100 Hz it adds nothing but cost)",
-    )
-    rng_ctrl: int = param(
-        1,
-        lo=0,
-        hi=2,
-        doc="range: 1 conditional (terrain; the height while low and slow over a baro or "
-        "GPS reference, PX4's range aid), 2 terrain, and the height when it is the reference",
-    )
-    rng_aid_max_height_m: float = param(
-        0.5, unit="m", lo=0.0, hi=10.0, doc="range aid below this height (hysteresis 20 %)"
-    )
-    rng_aid_max_speed_m_s: float = param(
-        1.0, unit="m/s", lo=0.0, hi=10.0, doc="range aid below this horizontal speed"
-    )
-    baro_ctrl: int = param(1, lo=0, hi=1, doc="barometer: 1 height when it is the reference")
-    hgt_ref: int = param(3, lo=0, hi=3, doc="height reference: 0 baro, 1 GPS, 2 range, 3 vision")
-    mag_decl_deg: float = param(
-        5.5, unit="deg", lo=-180.0, hi=180.0, doc="magnetic declination (packaged worlds: 5.5)"
-    )
-    ev_pos_noise_m: float = param(0.002, unit="m", lo=1e-4, hi=10.0, doc="mocap position sd")
-    ev_att_noise_rad: float = param(0.005, unit="rad", lo=1e-4, hi=1.0, doc="mocap yaw sd")
-    rng_noise_m: float = param(0.003, unit="m", lo=1e-4, hi=1.0, doc="range sd at short range")
-    rng_noise_per_m: float = param(0.01, lo=0.0, hi=1.0, doc="range sd added per metre")
-    of_noise_rad_s: float = param(0.15, unit="rad/s", lo=1e-3, hi=10.0, doc="flow rate sd")
-    gps_pos_noise_m: float = param(0.5, unit="m", lo=0.01, hi=100.0, doc="GPS position sd")
-    gps_vel_noise_m_s: float = param(0.15, unit="m/s", lo=0.01, hi=10.0, doc="GPS velocity sd")
-    baro_noise_m: float = param(0.15, unit="m", lo=0.01, hi=100.0, doc="barometer height sd")
-    mag_noise_rad: float = param(0.05, unit="rad", lo=1e-3, hi=3.0, doc="heading sd")
-    gate_sd: float = param(5.0, lo=1.0, hi=100.0, doc="innovation gate, standard deviations")
-    source_timeout_s: float = param(
-        0.3, unit="s", lo=0.01, hi=10.0, doc="a source silent this long is lost"
-    )
-
-
 @dataclass
 class Quality:
     """Innovation test ratios (largest seen, last) and counts per source, for the summary."""
@@ -98,14 +53,12 @@ class Quality:
     fused: dict[str, int] = field(default_factory=dict)
     rejected: dict[str, int] = field(default_factory=dict)
     ratio_max: dict[str, float] = field(default_factory=dict)
-    last_ratio: dict[str, float] = field(default_factory=dict)
     this_step: dict[str, float] = field(default_factory=dict)  # the ratios of the last update
     resets: int = 0
 
     def note(self, source: str, fused: ekf.Fused) -> None:
         book = self.fused if fused.accepted else self.rejected
         book[source] = book.get(source, 0) + 1
-        self.last_ratio[source] = fused.test_ratio
         self.this_step[source] = fused.test_ratio
         if math.isfinite(fused.test_ratio):
             self.ratio_max[source] = max(self.ratio_max.get(source, 0.0), fused.test_ratio)

@@ -21,9 +21,9 @@ import yaml
 
 from autopilot.commander import CommanderParams
 from autopilot.controller import ControllerParams
+from autopilot.estimator_params import EstimatorParams
 from autopilot.land_detector import LandDetectorParams
 from autopilot.mission_items import Geofence
-from autopilot.navigation import EstimatorParams
 from simbridge.config import ConfigError, param
 
 # failsafe actions, PX4's numbering for NAV_DLL_ACT and GF_ACTION

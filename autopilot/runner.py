@@ -22,9 +22,15 @@ from autopilot import requests
 from autopilot.commander import CommanderState, Phase, command
 from autopilot.controller import FlightState, control, integrate
 from autopilot.gcs_link import GcsLink
-from autopilot.ground_models import GroundEffectInputs, GroundEffectModel, make_model
+from autopilot.ground_models import (
+    GroundEffectInputs,
+    GroundEffectModel,
+    fixed_point_step,
+    make_model,
+)
 from autopilot.ground_station import GroundStation, StepInput
 from autopilot.land_detector import LandDetector, ground_contact
+from autopilot.learning_sample import learning_sample
 from autopilot.metrics import COLUMNS, flight_metrics, ge_error_metrics, trajectory_sha256
 from autopilot.mission_items import MissionItem
 from autopilot.modes import FlightMode
@@ -36,16 +42,7 @@ from autopilot.record_options import RecordOptions
 from autopilot.recorder import open_recorder
 from autopilot.signing import Signing
 from autopilot.simlink import LinkLost, SimLink, Step
-from simbridge.frames import (
-    Vec3,
-    frd_to_flu,
-    geodetic_to_local,
-    ned_to_enu,
-    quat_ned_frd_to_enu_flu,
-    quat_to_matrix,
-    rotate,
-)
-from simbridge.hil import RAD_S_TO_RPM
+from autopilot.truth import true_height_m, true_state
 from simbridge.rotors import Quad
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
@@ -90,86 +87,10 @@ class Flight:
     samples: np.ndarray | None = None  # learning samples, columns learner.dataset.COLUMNS
 
 
-def true_state(step: Step, origin: tuple[float, float, float]) -> FlightState | None:
-    """Ground truth from HIL_STATE_QUATERNION in the local frame (x east, y north, z up):
-    for the flight log, the recording and the estimator's error, never for control."""
-    if "HIL_STATE_QUATERNION" not in step.latest:
-        return None
-    s = step.latest["HIL_STATE_QUATERNION"]
-    local = step.latest.get("LOCAL_POSITION_NED") if "LOCAL_POSITION_NED" in step.new else None
-    if local is not None:  # the same truth in floats
-        position = ned_to_enu((local["x"], local["y"], local["z"]))
-        velocity = ned_to_enu((local["vx"], local["vy"], local["vz"]))
-    else:
-        east, north = geodetic_to_local(origin[0], origin[1], s["lat"] * 1e-7, s["lon"] * 1e-7)
-        position = (east, north, s["alt"] * 1e-3 - origin[2])
-        velocity = ned_to_enu((s["vx"] * 0.01, s["vy"] * 0.01, s["vz"] * 0.01))
-    return FlightState(
-        position_m=position,
-        velocity_m_s=velocity,
-        quaternion=quat_ned_frd_to_enu_flu(tuple(s["attitude_quaternion"])),
-        angular_velocity_body_rad_s=frd_to_flu((s["rollspeed"], s["pitchspeed"], s["yawspeed"])),
-    )
-
-
 RECORDED_PHASES = (Phase.TAKING_OFF, Phase.FLYING, Phase.HOLDING, Phase.LANDING)
 # Samples are taken in the air only: on the ground the contact force would pass for ground
 # effect in equation 3.16.
 AIRBORNE_MARGIN_M = 0.002
-
-
-def learning_sample(
-    t: float,
-    step: Step,
-    state: FlightState,
-    height: float,
-    applied_rad_s: Quad,
-    vehicle: Vehicle,
-    accel_bias_m_s2: Vec3 = (0.0, 0.0, 0.0),
-) -> tuple[float, ...]:
-    """One row of a learning dataset (learner.dataset.COLUMNS), from this step's messages.
-
-    The accelerometer's specific force is the mean over the control period that just ended,
-    under the rotor speeds sent for it (`applied_rad_s`); equation 3.16 then gives the force
-    nothing else explains: f_ge = m a - m g - R f_rotors (g pointing down).
-    """
-    m = quat_to_matrix(state.quaternion)
-    sensor = step.sensor
-    f = frd_to_flu((sensor["xacc"], sensor["yacc"], sensor["zacc"]))
-    b = accel_bias_m_s2  # the estimator's: a real vehicle's corrected accelerometer
-    a = rotate(m, (f[0] - b[0], f[1] - b[1], f[2] - b[2]))
-    a = (a[0], a[1], a[2] - GRAVITY_M_S2)
-    thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in applied_rad_s)
-    mass = vehicle.mass_kg
-    target = (
-        mass * a[0] - m[2] * thrust,
-        mass * a[1] - m[5] * thrust,
-        mass * a[2] + mass * GRAVITY_M_S2 - m[8] * thrust,
-    )
-    esc = step.latest.get("ESC_TELEMETRY_1_TO_4")
-    actual = tuple(r / RAD_S_TO_RPM for r in esc["rpm"]) if esc else (math.nan,) * 4
-    truth = step.latest.get("DEBUG_VECT")
-    true_ge = (truth["x"], truth["y"], truth["z"]) if truth else (math.nan,) * 3
-    v, q = state.velocity_m_s, state.quaternion
-    return (t, height, *v, *q, *applied_rad_s, *a, *actual, *target, *true_ge)
-
-
-def fixed_point_step(previous: Vec3, target: Vec3, rotor_thrust_n: float) -> Vec3:
-    """The next ground-effect estimate, from the model's value at the last rotor speeds.
-
-    The estimate depends on the rotor speeds it helps choose: a fixed point. Fed straight
-    back (next = target) the iteration has slope -G, G = f_ge / T, and diverges once the
-    ground effect exceeds the thrust causing it (rho = 2 below 2.5 cm). Moving a fraction
-    1 / (1 + G) of the way gives slope 0 for an effect proportional to thrust, as equation
-    3.4 is: the fixed point in one step, and no lag where G is small.
-    """
-    gain = max(target[2], 0.0) / rotor_thrust_n if rotor_thrust_n > 0.0 else 0.0
-    beta = 1.0 / (1.0 + gain)
-    return (
-        previous[0] + beta * (target[0] - previous[0]),
-        previous[1] + beta * (target[1] - previous[1]),
-        previous[2] + beta * (target[2] - previous[2]),
-    )
 
 
 class Tuning:
@@ -293,13 +214,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             state = nav.state()
             height = nav.height_m()
             actual = true_state(step, config.origin) or state
-            # the log and the recording are for evaluation: the truth, and the true height
-            # above the surface (without the simulator's ALTITUDE: over the terrain found)
-            true_height = (
-                step.latest["ALTITUDE"]["bottom_clearance"]
-                if "ALTITUDE" in step.latest
-                else actual.position_m[2] - nav.terrain_m
-            )
+            true_height = true_height_m(step, actual, nav.terrain_m)
             wall = time.monotonic()
             inp = StepInput(t, wall, state, height, resting_height, nav.position_lost(t))
             if not rows and config.mission:
@@ -337,7 +252,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 thrust_fraction,
                 tuning.land_detector,
             )
-            detector = detector.step(t, contact, tuning.land_detector)
+            detector = detector.step(t, contact)
             cmd = command(
                 cmd_state,
                 tuning.commander,
@@ -423,9 +338,10 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             if cmd_state.plan is not drawn_plan:
                 drawn_plan = cmd_state.plan
                 recorder.mission(cmd_state.plan, state.position_m, cmd_state.home_m, t)
+            nav_error = estimation_error(state, actual)
             if airborne and cmd_state.phase in RECORDED_PHASES:
-                nav_errors.append(estimation_error(state, actual))
-            recorder.estimator(t, estimation_error(state, actual), nav.quality.this_step)
+                nav_errors.append(nav_error)
+            recorder.estimator(t, nav_error, nav.quality.this_step)
             recorder.step(
                 t,
                 step,

@@ -237,14 +237,15 @@ class HilEncoder:
         b = self._position_bias
         return (p[0] + b[0], p[1] + b[1], p[2] + b[2])
 
-    def _geodetic(self, s: VehicleState) -> tuple[int, int, int]:
-        x, y, z = self._position(s)
+    def _geodetic(self, position_m: tuple[float, float, float]) -> tuple[int, int, int]:
+        """degE7, degE7, mm above mean sea level of a local position."""
+        x, y, z = position_m
         o = self.world.origin
         lat, lon = local_to_geodetic(o.lat_deg, o.lon_deg, x, y)
         return round(lat * 1e7), round(lon * 1e7), round(self._amsl_m(z) * 1000.0)
 
     def _hil_state(self, s: VehicleState, time_us: int) -> bytes:
-        lat, lon, alt = self._geodetic(s)
+        lat, lon, alt = self._geodetic(self._position(s))
         v = enu_to_ned(s.velocity_m_s)
         rates = flu_to_frd(s.angular_velocity_body_rad_s)
         # xacc..zacc: the true kinematic acceleration in body FRD (as Gazebo reports it), mG.
@@ -360,12 +361,11 @@ class HilEncoder:
     def _gps(self, s: VehicleState, time_us: int) -> bytes:
         n, errors = self._errors.noise, self._errors
         x, y, z = self._position(s)
-        x = errors.scalar(x, n.gps_horizontal_m)
-        y = errors.scalar(y, n.gps_horizontal_m)
-        z = errors.scalar(z, n.gps_vertical_m)
-        o = self.world.origin
-        lat_deg, lon_deg = local_to_geodetic(o.lat_deg, o.lon_deg, x, y)
-        lat, lon, alt = round(lat_deg * 1e7), round(lon_deg * 1e7), round(self._amsl_m(z) * 1e3)
+        lat, lon, alt = self._geodetic((
+            errors.scalar(x, n.gps_horizontal_m),
+            errors.scalar(y, n.gps_horizontal_m),
+            errors.scalar(z, n.gps_vertical_m),
+        ))  # fmt: skip
         vn, ve, vd = enu_to_ned(errors.vector(s.velocity_m_s, n.gps_velocity_m_s))
         ground = math.hypot(vn, ve)
         cog = (

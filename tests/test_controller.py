@@ -7,8 +7,12 @@ import math
 import pytest
 
 from autopilot.controller import ControllerParams, FlightState, Setpoint, control, integrate
-from autopilot.ground_models import AnalyticGroundEffect, GroundEffectInputs, make_model
-from autopilot.runner import fixed_point_step
+from autopilot.ground_models import (
+    AnalyticGroundEffect,
+    GroundEffectInputs,
+    fixed_point_step,
+    make_model,
+)
 from simbridge.config import ConfigError
 from simbridge.effects.ground import ground_effect_force_n
 from simbridge.frames import quat_from_euler

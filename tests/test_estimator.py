@@ -117,11 +117,11 @@ def test_ground_contact_needs_every_sign_of_it_for_the_trigger_time():
     assert not ground_contact(**{**sitting, "height_m": resting + 0.5}, params=p)
     d = LandDetector()
     for t in (0.0, 0.1, 0.2):
-        d = d.step(t, True, p)
+        d = d.step(t, True)
     assert not d.landed(0.2, p)
-    d = d.step(0.31, True, p)
+    d = d.step(0.31, True)
     assert d.landed(0.31, p)
-    assert not d.step(0.32, False, p).landed(0.32, p)  # a break starts it over
+    assert not d.step(0.32, False).landed(0.32, p)  # a break starts it over
 
 
 def test_the_landing_setpoint_stops_below_the_resting_height_and_contact_lands():

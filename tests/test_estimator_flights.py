@@ -19,7 +19,7 @@ RHO2 = [{"name": "ground_effect", "rho": 2.0}]
 
 
 def sensors(name: str) -> list[str]:
-    from autopilot.navigation import SENSOR_SETS
+    from autopilot.estimator_params import SENSOR_SETS
 
     return [a for k, v in SENSOR_SETS[name].items() for a in ("--param", f"{k}={v}")]
 
