@@ -15,7 +15,8 @@ import pytest
 import yaml
 
 from learner.flightlogs.readers import read_log
-from mission.campaigns.gap_bench import CASES, run_case
+from mission.campaigns.gap_bench import run_case
+from mission.campaigns.gap_bench_cases import CASES
 from mission.cli.main import main
 
 

@@ -4,7 +4,8 @@ to the exact set and 10% parameter error."""
 
 from __future__ import annotations
 
-from mission.campaigns.gap_bench import CASES, real_effects, score, summarise, table
+from mission.campaigns.gap_bench import score, summarise, table
+from mission.campaigns.gap_bench_cases import CASES, real_effects
 from simbridge.effects import PARAMS_BY_NAME, UNCATALOGUED, parse_effects
 
 

@@ -107,7 +107,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from mission.campaigns.gap_bench import CASES, run_bench, table
+    from mission.campaigns.gap_bench import run_bench, table
+    from mission.campaigns.gap_bench_cases import CASES
 
     names = args.cases.split(",") if args.cases else list(CASES)
     unknown = [n for n in names if n not in CASES]
