@@ -1,4 +1,5 @@
-"""The autopilot's end of the PX4 simulator protocol: a TCP client (`tcp:HOST:PORT`).
+"""The autopilot's end of the PX4 simulator protocol: a client of `tcp:HOST:PORT` or, where
+the simulator is ours, `unix:PATH` (simbridge/transport.py: blocking reads, no polling).
 
 Each step it reads the simulator's messages up to HIL_SENSOR (the tick) and answers with one
 HIL_ACTUATOR_CONTROLS stamped with that tick's time and the lockstep flag. Malformed and
@@ -16,12 +17,11 @@ stale. In lockstep there is never more than one tick waiting.
 from __future__ import annotations
 
 import socket
-import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from simbridge import transport
 from simbridge.hil import ARMED_MODE, LOCKSTEP_FLAG, mavlink
-from simbridge.spin import SpinPolicy
 from simbridge.wire import FrameReader, PacketSequence, WirePacker
 
 AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID = 1, 1
@@ -31,12 +31,9 @@ class LinkLost(Exception):
     """The simulator link is gone; the message says how."""
 
 
-def parse_url(url: str) -> tuple[str, int]:
-    """`tcp:HOST:PORT` (pymavlink style) into (host, port)."""
-    parts = url.split(":")
-    if len(parts) != 3 or parts[0] != "tcp" or not parts[2].isdigit():
-        raise ValueError(f"--sim: expected tcp:HOST:PORT, got {url!r}")
-    return parts[1], int(parts[2])
+def parse_url(url: str) -> None:
+    """Refuses a `--sim` URL that is neither `tcp:HOST:PORT` nor `unix:PATH` (ValueError)."""
+    transport.parse_url(url)
 
 
 @dataclass
@@ -50,22 +47,18 @@ class Step:
 
 class SimLink:
     def __init__(self, url: str, timeout_s: float = 1.0, connect_timeout_s: float = 10.0) -> None:
-        host, port = parse_url(url)
-        deadline = time.monotonic() + connect_timeout_s
-        while True:
-            try:
-                self._sock = socket.create_connection((host, port), timeout=connect_timeout_s)
-                break
-            except ConnectionRefusedError:
-                if time.monotonic() > deadline:
-                    raise LinkLost(f"no simulator at {url}") from None
-                time.sleep(0.05)
-        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self._sock.settimeout(timeout_s)
+        try:
+            self._sock = transport.connect(url, connect_timeout_s)
+        except ConnectionError as err:  # nothing listening until the connect timeout
+            raise LinkLost(str(err)) from None
+        except OSError as err:
+            raise LinkLost(f"cannot reach the simulator at {url}: {err}") from None
         self._timeout_s = timeout_s
         # the first state may take longer: a simulator starved on a loaded machine (or an
         # outside one still building its world) is not a lost link
         self._first_timeout_s = max(timeout_s, connect_timeout_s)
+        transport.set_recv_timeout(self._sock, self._first_timeout_s)
+        transport.set_send_timeout(self._sock, timeout_s)
         self._reader = FrameReader(mavlink)
         self._queue: list[tuple[str, dict[str, Any]]] = []
         self._latest: dict[str, dict[str, Any]] = {}
@@ -76,7 +69,6 @@ class SimLink:
             PacketSequence(),
         )
         self._controls = [0.0] * 16
-        self._spin = SpinPolicy()
         self.received = 0  # messages decoded
 
     @property
@@ -101,12 +93,9 @@ class SimLink:
                 new.add(kind)
                 if kind == "HIL_SENSOR":
                     return Step(fields, self._latest, new)
-            data = self._poll()
             try:
-                if data is None:
-                    self._sock.settimeout(self._wait_s())
-                    data = self._sock.recv(65536)
-            except TimeoutError:
+                data = self._sock.recv(65536)  # blocking, bounded by SO_RCVTIMEO
+            except (BlockingIOError, TimeoutError):
                 raise LinkLost(
                     f"lost the simulator link: no data for {self._wait_s():g} s"
                 ) from None
@@ -116,6 +105,8 @@ class SimLink:
                 ) from None
             if not data:
                 raise LinkLost("lost the simulator link: it closed the connection")
+            if not self.received:
+                transport.set_recv_timeout(self._sock, self._timeout_s)
             frames = self._reader.feed(data)
             self.received += len(frames)
             self._queue.extend(frames)
@@ -128,31 +119,12 @@ class SimLink:
         is working through a backlog. A peek, for the moments before arming only."""
         if any(kind == "HIL_SENSOR" for kind, _ in self._queue):
             return True
-        self._sock.setblocking(False)  # with a timeout set, recv would wait for data first
         try:
-            return bool(self._sock.recv(1, socket.MSG_PEEK))
+            return bool(self._sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT))
         except (BlockingIOError, InterruptedError):
             return False
         except OSError:
             return False  # the next receive reports it
-
-    def _poll(self) -> bytes | None:
-        """Busy-poll briefly before sleeping in the kernel, on an otherwise idle machine only
-        (simbridge/spin.py): the simulator's step takes about 100 us."""
-        spin_s = self._spin.spin_s()
-        if not spin_s:
-            return None
-        sock = self._sock
-        sock.setblocking(False)
-        end = time.perf_counter() + spin_s
-        while time.perf_counter() < end:
-            try:
-                return sock.recv(65536)
-            except BlockingIOError:
-                continue
-            except OSError:
-                return None  # the blocking receive reports it
-        return None
 
     def send(
         self,
@@ -166,7 +138,6 @@ class SimLink:
             c[ch] = value
         mode = ARMED_MODE if armed else 0
         try:
-            self._sock.settimeout(self._timeout_s)
             self._sock.sendall(self._pack.pack(time_us, c, mode, LOCKSTEP_FLAG))
         except OSError:
             raise LinkLost("lost the simulator link: it closed the connection") from None

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -15,7 +16,7 @@ from mission.gcs_client import GroundStation, GroundStationError, VehicleEnded
 from mission.plans.formats import load_mission_file
 from mission.recordings import default_recording_path
 from simbridge.config import ConfigError
-from simbridge.launch import finish, start_sim
+from simbridge.launch import finish, spawn_local_sim
 from simbridge.world import load_world, resolve_world_path
 
 
@@ -25,16 +26,18 @@ def default_rho(world_name: str) -> float:
     return ge.rho if ge is not None else 1.0
 
 
-def _autopilot(sim_port: int, *options: str) -> list[str]:
-    """An autopilot process against a local simulator, starting from default parameters."""
+def _autopilot(sim: int | str, *options: str) -> list[str]:
+    """An autopilot process against a local simulator (a TCP port on this machine or a URL),
+    starting from default parameters."""
+    url = f"tcp:127.0.0.1:{sim}" if isinstance(sim, int) else sim
     return [
         *(sys.executable, "-m", "mission.cli", "autopilot"),
-        *("--sim", f"tcp:127.0.0.1:{sim_port}", "--params-file", "none"),
+        *("--sim", url, "--params-file", "none"),
         *options,
     ]
 
 
-def autopilot_command(sim_port: int, mission_path: Path, *options: str) -> list[str]:
+def autopilot_command(sim_port: int | str, mission_path: Path, *options: str) -> list[str]:
     """The command line of an autopilot process flying `mission_path` against a local sim on
     its own, with no ground station (reproducible: arming and take-off at fixed sim times)."""
     return _autopilot(
@@ -42,7 +45,7 @@ def autopilot_command(sim_port: int, mission_path: Path, *options: str) -> list[
     )
 
 
-def gcs_autopilot_command(sim_port: int, gcs_port: int, *options: str) -> list[str]:
+def gcs_autopilot_command(sim_port: int | str, gcs_port: int, *options: str) -> list[str]:
     """An autopilot process that waits for a ground station on udpout:127.0.0.1:`gcs_port`."""
     return _autopilot(
         sim_port, "--out", f"udpout:127.0.0.1:{gcs_port}", "--exit-after-landing", *options
@@ -97,11 +100,15 @@ def fly(
     options += autopilot_options  # e.g. the experiments' --online METHOD
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
-    sim, port = start_sim(
+    # both ends are ours: a Unix-domain socket, and the two processes start side by side
+    socket_dir = tempfile.TemporaryDirectory(prefix="groundfx-")
+    socket_path = Path(socket_dir.name) / "sim.sock"
+    port = f"unix:{socket_path}"
+    sim = spawn_local_sim(
         resolve_world_path(world),
+        socket_path,
         speedup=speedup,
         start=start,
-        lockstep_start=True,
         extra=list(sim_options),
     )
     gcs: dict[str, Any] = {}
@@ -129,6 +136,7 @@ def fly(
             code = process.returncode
     finally:
         sim_line = finish(sim)
+        socket_dir.cleanup()
         if station is not None:
             station.close()
     lines = out.strip().splitlines()

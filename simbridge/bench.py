@@ -1,33 +1,54 @@
-"""`groundfx bench sim`: how fast the physics and the lockstep link run, in real-time factors."""
+"""`groundfx bench sim`: how fast the physics and the lockstep link run, each beside a
+reference measured in the same run on the same machine (machines are shared and noisy: the
+ratio holds where the absolute figure does not).
+
+- physics: `Simulation.step` (ground effect on, a hover at 0.1 m) against a bare quadrotor
+  loop in PyBullet: the same body, and per physics step only what any PyBullet quadrotor
+  does (read pose and velocity, apply the four rotor thrusts at their hubs and the yaw
+  moment, step), as gym-pybullet-drones' `_physics` does;
+- lockstep: `groundfx sim` in its own process against a minimal pymavlink client, against
+  `simbridge.pingpong` (the same messages packed and parsed by pymavlink, no physics) with
+  the same client.
+"""
 
 from __future__ import annotations
 
+import os
+import statistics
+import subprocess
+import sys
 import time
 from typing import Any
 
 from simbridge.client import connect, constant, hover_fraction, run_lockstep
 from simbridge.effects.ground import hover_rotor_speed_in_ground_effect_rad_s
-from simbridge.launch import finish, start_sim
+from simbridge.launch import SimProcessError, finish, start_sim
 from simbridge.physics import Simulation
+from simbridge.pingpong import LISTENING
+from simbridge.pybullet_quiet import pybullet as pb
 from simbridge.vehicle import Vehicle, load_vehicle
 from simbridge.world import World, load_world, resolve_world_path, with_start
 
 BENCH_ALTITUDE_M = 0.1  # deep enough in ground effect that every step evaluates it
 
 
+def _hover_rad_s(world: World, vehicle: Vehicle) -> float:
+    ge = world.effects.ground_effect
+    if ge is None:
+        return vehicle.hover_rotor_speed_rad_s
+    return hover_rotor_speed_in_ground_effect_rad_s(
+        vehicle.weight_n,
+        vehicle.thrust_coefficient_n_s2,
+        BENCH_ALTITUDE_M,
+        ge.rho,
+        vehicle.rotor_radius_m,
+        ge.cutoff_for(vehicle.rotor_radius_m),
+    )
+
+
 def physics_rtf(world: World, vehicle: Vehicle, seconds: float) -> dict[str, float]:
     """Physics alone: the vehicle hovering in ground effect, stepped as fast as possible."""
-    ge = world.effects.ground_effect
-    n = vehicle.hover_rotor_speed_rad_s
-    if ge is not None:
-        n = hover_rotor_speed_in_ground_effect_rad_s(
-            vehicle.weight_n,
-            vehicle.thrust_coefficient_n_s2,
-            BENCH_ALTITUDE_M,
-            ge.rho,
-            vehicle.rotor_radius_m,
-            ge.cutoff_for(vehicle.rotor_radius_m),
-        )
+    n = _hover_rad_s(world, vehicle)
     steps = max(1, round(seconds / world.control_period_s))
     with Simulation(with_start(world, (0.0, 0.0, BENCH_ALTITUDE_M)), vehicle) as sim:
         t0 = time.perf_counter()
@@ -43,6 +64,37 @@ def physics_rtf(world: World, vehicle: Vehicle, seconds: float) -> dict[str, flo
     }
 
 
+def bare_loop_rtf(world: World, vehicle: Vehicle, seconds: float) -> dict[str, float]:
+    """The reference: the same body in the same world, stepped by a bare quadrotor loop."""
+    steps = max(1, round(seconds * world.physics_rate_hz))
+    thrust = [0.0, 0.0, vehicle.weight_n / 4.0]
+    no_moment = [0.0, 0.0, 0.0]
+    hubs = vehicle.rotor_positions_body_m()
+    with Simulation(with_start(world, (0.0, 0.0, BENCH_ALTITUDE_M)), vehicle) as sim:
+        sim.release()
+        cid, body = sim._cid, sim._body
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            pb.getBasePositionAndOrientation(body, physicsClientId=cid)
+            pb.getBaseVelocity(body, physicsClientId=cid)
+            for hub in hubs:
+                pb.applyExternalForce(body, -1, thrust, hub, pb.LINK_FRAME, physicsClientId=cid)
+            pb.applyExternalTorque(body, -1, no_moment, pb.LINK_FRAME, physicsClientId=cid)
+            pb.stepSimulation(physicsClientId=cid)
+        wall = time.perf_counter() - t0
+    return {"bare_loop_rtf": seconds / wall, "bare_loop_us_per_step": wall / steps * 1e6}
+
+
+def _lockstep(port: int, steps: int, command: Any) -> float:
+    sock = connect("127.0.0.1", port)
+    try:
+        t0 = time.perf_counter()
+        run_lockstep(sock, steps, command)
+        return time.perf_counter() - t0
+    finally:
+        sock.close()
+
+
 def lockstep_rtf(
     world_name: str, vehicle: Vehicle, control_period_s: float, seconds: float
 ) -> dict[str, Any]:
@@ -52,13 +104,7 @@ def lockstep_rtf(
     command = constant(
         hover_fraction(vehicle.hover_rotor_speed_rad_s, vehicle.max_rotor_speed_rad_s)
     )
-    sock = connect("127.0.0.1", port)
-    try:
-        t0 = time.perf_counter()
-        run_lockstep(sock, steps, command)
-        wall = time.perf_counter() - t0
-    finally:
-        sock.close()
+    wall = _lockstep(port, steps, command)
     last_line = finish(proc)
     return {
         "lockstep_rtf": steps * control_period_s / wall,
@@ -67,16 +113,65 @@ def lockstep_rtf(
     }
 
 
-def bench_sim(world_name: str = "default", seconds: float = 20.0) -> dict[str, Any]:
+def pingpong_rtf(
+    world_name: str, vehicle: Vehicle, control_period_s: float, seconds: float
+) -> dict[str, Any]:
+    """The reference: `simbridge.pingpong` with the same client, as many steps."""
+    cmd = [sys.executable, "-m", "simbridge.pingpong", "--world", world_name]
+    cmd += ["--altitude", str(BENCH_ALTITUDE_M)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    if not line.startswith(LISTENING):
+        proc.kill()
+        raise SimProcessError(f"the ping-pong reference did not start: {line.strip()}")
+    steps = max(1, round(seconds / control_period_s))
+    command = constant(
+        hover_fraction(vehicle.hover_rotor_speed_rad_s, vehicle.max_rotor_speed_rad_s)
+    )
+    wall = _lockstep(int(line.rsplit(":", 1)[1]), steps, command)
+    finish(proc)
+    return {
+        "pingpong_rtf": steps * control_period_s / wall,
+        "pingpong_us_per_step": wall / steps * 1e6,
+    }
+
+
+def bench_sim(
+    world_name: str = "default", seconds: float = 20.0, repeat: int = 5
+) -> dict[str, Any]:
+    """Each figure and its reference `repeat` times, interleaved (the load of a shared machine
+    drifts); medians, the ratio of the medians, and the load average over the run."""
     world = load_world(world_name)
     vehicle = load_vehicle(world.vehicle)
+    path = str(resolve_world_path(world_name))
+    load_before = os.getloadavg()[0]
+    runs: dict[str, list[float]] = {}
+    last: dict[str, Any] = {}
+    for _ in range(repeat):
+        for figure in (
+            physics_rtf(world, vehicle, seconds),
+            bare_loop_rtf(world, vehicle, seconds),
+            lockstep_rtf(path, vehicle, world.control_period_s, seconds),
+            pingpong_rtf(path, vehicle, world.control_period_s, seconds),
+        ):
+            last.update(figure)
+            for key, value in figure.items():
+                if isinstance(value, float):
+                    runs.setdefault(key, []).append(value)
     result: dict[str, Any] = {
-        "world": str(resolve_world_path(world_name)),
+        "world": path,
         "effects": world.effects.names(),
         "physics_hz": world.physics_rate_hz,
         "control_hz": round(1.0 / world.control_period_s),
         "sim_s": seconds,
+        "repeat": repeat,
+        **{key: statistics.median(values) for key, values in runs.items()},
+        "sim_report": last["sim_report"],
+        "physics_runs": runs["physics_rtf"],
+        "lockstep_runs": runs["lockstep_rtf"],
     }
-    result.update(physics_rtf(world, vehicle, seconds))
-    result.update(lockstep_rtf(world_name, vehicle, world.control_period_s, seconds))
+    result["physics_ratio"] = result["physics_rtf"] / result["bare_loop_rtf"]
+    result["lockstep_ratio"] = result["lockstep_rtf"] / result["pingpong_rtf"]
+    result["load_average"] = (load_before, os.getloadavg()[0])
     return result

@@ -9,11 +9,32 @@ import sys
 from pathlib import Path
 from typing import Any
 
-LISTENING = "groundfx sim: listening on tcp:"
+LISTENING = "groundfx sim: listening on tcp:"  # the line that gives the port
 
 
 class SimProcessError(RuntimeError):
     pass
+
+
+def sim_command(
+    world: str | Path = "default",
+    *,
+    speedup: str = "max",
+    start: str | None = None,
+    extra: list[str] | None = None,
+    lockstep_start: bool = False,
+    unix_path: str | Path | None = None,
+) -> list[str]:
+    """The command line of a `groundfx sim` process (on an ephemeral TCP port, or on a
+    Unix-domain socket at `unix_path`)."""
+    cmd = [sys.executable, "-m", "mission.cli", "sim", "--world", str(world)]
+    cmd += ["--port", "0"] if unix_path is None else ["--unix", str(unix_path)]
+    cmd += ["--speedup", speedup]
+    if start is not None:
+        cmd.append(f"--start={start}")  # a leading minus would read as an option
+    if lockstep_start:
+        cmd.append("--lockstep-start")
+    return cmd + (extra or [])
 
 
 def start_sim(
@@ -28,23 +49,9 @@ def start_sim(
     """The simulator process and the TCP port it listens on (it prints it first).
     `lockstep_start`: for our own autopilot's reproducible flights (`groundfx sim --help`);
     `supervised`: see `supervised_options`."""
-    cmd = [
-        sys.executable,
-        "-m",
-        "mission.cli",
-        "sim",
-        "--world",
-        str(world),
-        "--port",
-        "0",
-        "--speedup",
-        speedup,
-    ]
-    if start is not None:
-        cmd.append(f"--start={start}")  # a leading minus would read as an option
-    if lockstep_start:
-        cmd.append("--lockstep-start")
-    cmd += extra or []
+    cmd = sim_command(
+        world, speedup=speedup, start=start, extra=extra, lockstep_start=lockstep_start
+    )
     options = supervised_options() if supervised else {}
     proc = subprocess.Popen(
         cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **options
@@ -56,6 +63,23 @@ def start_sim(
         _, err = proc.communicate(timeout=10)
         raise SimProcessError(f"groundfx sim did not start: {(line + err).strip()}")
     return proc, int(line.rsplit(":", 1)[1])
+
+
+def spawn_local_sim(
+    world: str | Path,
+    unix_path: Path,
+    *,
+    speedup: str = "max",
+    start: str | None = None,
+    extra: list[str] | None = None,
+) -> subprocess.Popen[str]:
+    """A simulator for an autopilot of ours, on a Unix-domain socket, in lockstep from its
+    first tick; not waited for: the autopilot, started beside it, connects as soon as it
+    listens (it retries), so that the two processes' start-ups overlap."""
+    cmd = sim_command(
+        world, speedup=speedup, start=start, extra=extra, lockstep_start=True, unix_path=unix_path
+    )
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
 def finish(proc: subprocess.Popen[str], timeout_s: float = 10.0) -> str:

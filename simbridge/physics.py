@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from simbridge.effects.actuators import motor_lag_step
 from simbridge.effects.drag import body_drag_n, rotor_drag_n, wind_velocity_m_s
-from simbridge.effects.ground import ground_effect_force_n, thrust_gain
+from simbridge.effects.ground import ground_effect_forces_n, thrust_gain
 from simbridge.effects.learned import learned_force_n
 from simbridge.effects.proximity import WALL_DIRECTIONS, wall_force_n
 from simbridge.effects.uncatalogued import (
@@ -27,12 +27,14 @@ from simbridge.effects.uncatalogued import (
 from simbridge.frames import Quat, Vec3, quat_from_euler, wxyz_to_xyzw, xyzw_to_wxyz
 from simbridge.pybullet_quiet import pybullet as pb
 from simbridge.rotors import Quad, rotor_forces_n, thrust_and_moments
+from simbridge.surface_rays import VerticalRays, footprint
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 from simbridge.world import World
 
 WORLD_GROUP = 1  # collision group of the ground and obstacles: what rays see
 VEHICLE_GROUP = 2
 NO_HIT = math.inf
+CEILING_SIZE_M = (1000.0, 1000.0)  # the ceiling slab's extent
 LEARNED_RAY_M = 3.0  # a learnt residual's height rays: beyond, its feature is capped anyway
 
 
@@ -109,6 +111,10 @@ class Simulation:
         self._down_m = max(lengths + ([LEARNED_RAY_M] if self._learned else []), default=None)
         self._lift_off_us: int | None = None  # see time_since_takeoff_s
         self._build_vehicle()
+        self._vertical_rays = self._build_rays()
+        self._hub_rays_only = (
+            self._down_m is not None and self._ce is None and self._outwash is None
+        )
 
         self._rotor_speeds: list[float] = [0.0, 0.0, 0.0, 0.0]
         self._heights: list[float] = [NO_HIT] * 4
@@ -137,9 +143,8 @@ class Simulation:
                 )
             )
         if w.ceiling_height_m is not None:
-            slab = pb.createCollisionShape(
-                pb.GEOM_BOX, halfExtents=[500.0, 500.0, 0.05], physicsClientId=cid
-            )
+            half = [CEILING_SIZE_M[0] / 2, CEILING_SIZE_M[1] / 2, 0.05]
+            slab = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=cid)
             self._surfaces.append(
                 pb.createMultiBody(
                     0.0,
@@ -154,6 +159,28 @@ class Simulation:
             pb.changeDynamics(
                 uid, -1, lateralFriction=w.ground_friction, restitution=0.0, physicsClientId=cid
             )
+
+    def _build_rays(self) -> VerticalRays | None:
+        """Down rays from the hubs (rotor heights), up rays from them (the ceiling effect),
+        a down ray from the centre (the outwash's height): one batch, cast when needed."""
+        signs: list[int] = []
+        reach: list[float] = []
+        if self._down_m is not None:
+            signs += [-1] * 4
+            reach += [self._down_m] * 4
+        if self._ce is not None:
+            signs += [1] * 4
+            reach += [self._ce.ray_length_m] * 4
+        if self._outwash is not None:
+            signs.append(-1)
+            reach.append(self._outwash.ray_length_m)
+        if not signs:
+            return None
+        w = self.world
+        prints = [footprint(b.center_m, b.size_m, math.radians(b.yaw_deg)) for b in w.obstacles]
+        if w.ceiling_height_m is not None:
+            prints.append(footprint((0.0, 0.0), CEILING_SIZE_M, 0.0))
+        return VerticalRays(self._cid, prints, signs, reach, WORLD_GROUP)
 
     def _build_vehicle(self) -> None:
         cid, v, start = self._cid, self.vehicle, self.world.start
@@ -223,42 +250,54 @@ class Simulation:
             self._time_us += world.control_period_us
             self._acceleration = (0.0, 0.0, 0.0)
             return
-        v0, _ = pb.getBaseVelocity(self._body, physicsClientId=self._cid)
+        cid, body = self._cid, self._body
+        v0, _ = pb.getBaseVelocity(body, physicsClientId=cid)
+        # without motor lag or thrust decay the rotor forces hold over the control period
+        constant = self._lag_tau is None and self._decay is None
+        if constant:
+            self._rotor_speeds[:] = rotor_commands_rad_s
+            f = self._forces(self._rotor_speeds)
+            tm = thrust_and_moments(f, self._arm, self._kz)  # equation 3.6, body
         for _ in range(world.substeps):
-            self._substep(rotor_commands_rad_s)
-        v1, _ = pb.getBaseVelocity(self._body, physicsClientId=self._cid)
+            if not constant:
+                f = self._forces(self._lagged(rotor_commands_rad_s))
+                tm = thrust_and_moments(f, self._arm, self._kz)
+            self._substep(f, tm)
+        v1, _ = pb.getBaseVelocity(body, physicsClientId=cid)
         inv = 1.0 / world.control_period_s
         self._acceleration = ((v1[0] - v0[0]) * inv, (v1[1] - v0[1]) * inv, (v1[2] - v0[2]) * inv)
         self._time_us += world.control_period_us
 
-    def _substep(self, cmd: Quad) -> None:
-        cid, body, dt = self._cid, self._body, self._dt
+    def _lagged(self, cmd: Quad) -> list[float]:
+        n, tau, dt = self._rotor_speeds, self._lag_tau, self._dt
+        if tau is None:
+            n[:] = cmd
+        else:
+            for i in range(4):
+                n[i] = motor_lag_step(n[i], cmd[i], dt, tau)
+        return n
+
+    def _forces(self, n: list[float]) -> Quad:
+        """Equation 3.5 with the thrust decay's scale and a rotor asymmetry, if any."""
+        if self._decay is None:
+            f = rotor_forces_n(self._c_t, n)
+        else:
+            self._thrust_scale = thrust_decay_scale(self._decay, self.time_since_takeoff_s)
+            f = rotor_forces_n(self._c_t * self._thrust_scale, n)
+        return f if self._asym is None else asymmetric_forces_n(self._asym, f)
+
+    def _substep(self, f: Quad, tm: tuple[float, float, float, float]) -> None:
+        """One physics step with rotor forces `f` and their thrust and moments `tm`."""
+        cid, body = self._cid, self._body
         pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
         m = pb.getMatrixFromQuaternion(orn)
         if self._lift_off_us is None and pos[2] > self.resting_height_m + TAKEOFF_HEIGHT_M:
             self._lift_off_us = self._time_us
-        n = self._rotor_speeds
-        if self._lag_tau is None:
-            n[0], n[1], n[2], n[3] = cmd
-        else:
-            tau = self._lag_tau
-            for i in range(4):
-                n[i] = motor_lag_step(n[i], cmd[i], dt, tau)
-        if self._decay is None:
-            f = rotor_forces_n(self._c_t, n)  # equation 3.5
-        else:
-            self._thrust_scale = thrust_decay_scale(self._decay, self.time_since_takeoff_s)
-            f = rotor_forces_n(self._c_t * self._thrust_scale, n)
-        if self._asym is not None:
-            f = asymmetric_forces_n(self._asym, f)
+        m0, m1, m2, m3, m4, m5, m6, m7, m8 = m
 
         # Rotor hubs relative to the centre of mass, in the world frame.
         offsets = [
-            (
-                m[0] * rx + m[1] * ry + m[2] * rz,
-                m[3] * rx + m[4] * ry + m[5] * rz,
-                m[6] * rx + m[7] * ry + m[8] * rz,
-            )
+            (m0 * rx + m1 * ry + m2 * rz, m3 * rx + m4 * ry + m5 * rz, m6 * rx + m7 * ry + m8 * rz)
             for rx, ry, rz in self._rotors_body
         ]
         heights, ceilings, walls, below = self._ray_tests(pos, offsets)
@@ -271,28 +310,26 @@ class Simulation:
                 for fi, d in zip(f, ceilings, strict=True)
             ]
             extra = sum(boosted) - sum(f)
-            self._ce_force[:] = (m[2] * extra, m[5] * extra, m[8] * extra)
+            self._ce_force[:] = (m2 * extra, m5 * extra, m8 * extra)
             f = boosted
-        thrust, mx, my, mz = thrust_and_moments(f, self._arm, self._kz)  # equation 3.6, body
-        force = [m[2] * thrust, m[5] * thrust, m[8] * thrust]
-        torque = [
-            m[0] * mx + m[1] * my + m[2] * mz,
-            m[3] * mx + m[4] * my + m[5] * mz,
-            m[6] * mx + m[7] * my + m[8] * mz,
-        ]
+            tm = thrust_and_moments(f, self._arm, self._kz)
+        thrust, mx, my, mz = tm
+        force = [m2 * thrust, m5 * thrust, m8 * thrust]
+        tx = m0 * mx + m1 * my + m2 * mz
+        ty = m3 * mx + m4 * my + m5 * mz
+        tz = m6 * mx + m7 * my + m8 * mz
 
         if self._ge is not None:  # equation 3.4: vertical, at each rotor hub
-            rho, radius, cut = self._ge.rho, self._radius, self._ge_cutoff
-            total = 0.0
-            reach = self._ge.ray_length_m  # the rays may reach further for another effect
-            for i in range(4):
-                h = heights[i] if heights[i] <= reach else NO_HIT
-                g = ground_effect_force_n(f[i], h, rho, radius, cut)
-                self._ge_rotor[i] = g
-                total += g
-                torque[0] += offsets[i][1] * g
-                torque[1] -= offsets[i][0] * g
+            ge = self._ge
+            g = ground_effect_forces_n(
+                f, heights, ge.rho, self._radius, self._ge_cutoff, ge.ray_length_m
+            )
+            (o0, o1, o2, o3) = offsets
+            tx += o0[1] * g[0] + o1[1] * g[1] + o2[1] * g[2] + o3[1] * g[3]
+            ty -= o0[0] * g[0] + o1[0] * g[1] + o2[0] * g[2] + o3[0] * g[3]
+            total = g[0] + g[1] + g[2] + g[3]
             force[2] += total
+            self._ge_rotor = g
             self._ge_force[2] = total
         if self._gex is not None:  # the exponential shape, vertical at each hub likewise
             gain, decay, reach = (
@@ -303,10 +340,10 @@ class Simulation:
             total = 0.0
             for i in range(4):
                 h = heights[i]
-                g = f[i] * exponential_gain(h, gain, decay) if h <= reach else 0.0
-                total += g
-                torque[0] += offsets[i][1] * g
-                torque[1] -= offsets[i][0] * g
+                g_i = f[i] * exponential_gain(h, gain, decay) if h <= reach else 0.0
+                total += g_i
+                tx += offsets[i][1] * g_i
+                ty -= offsets[i][0] * g_i
             force[2] += total
             self._gex_force[2] = total
         self._heights = heights
@@ -323,12 +360,12 @@ class Simulation:
             force[1] += ow[1]
             self._outwash_force[:] = ow
         if self._drag:
-            self._apply_drag(force, m, n)
+            self._apply_drag(force, m, self._rotor_speeds)
         if self._learned is not None:
             self._apply_learned(force, m, f, heights)
 
         pb.applyExternalForce(body, -1, force, pos, pb.WORLD_FRAME, physicsClientId=cid)
-        pb.applyExternalTorque(body, -1, torque, pb.WORLD_FRAME, physicsClientId=cid)
+        pb.applyExternalTorque(body, -1, (tx, ty, tz), pb.WORLD_FRAME, physicsClientId=cid)
         pb.stepSimulation(physicsClientId=cid)
 
     def _apply_drag(self, force: list[float], m: tuple[float, ...], n: list[float]) -> None:
@@ -381,48 +418,49 @@ class Simulation:
     def _ray_tests(
         self, pos: tuple[float, ...], offsets: list[Vec3]
     ) -> tuple[list[float], list[float], tuple[float, ...], float]:
-        """One batch of rays: down and up from each rotor hub, sideways from the centre, and
-        down from the centre (the outwash's height)."""
-        starts, ends = [], []
-        px, py, pz = pos
-        ce, wall, outwash = self._ce, self.world.effects.wall_effect, self._outwash
-        down = self._down_m
-        if down is not None:
-            for ox, oy, oz in offsets:
-                starts.append((px + ox, py + oy, pz + oz))
-                ends.append((px + ox, py + oy, pz + oz - down))
-        if ce is not None:
-            length = ce.ray_length_m
-            for ox, oy, oz in offsets:
-                starts.append((px + ox, py + oy, pz + oz))
-                ends.append((px + ox, py + oy, pz + oz + length))
-        if wall is not None:
-            for ux, uy, _ in WALL_DIRECTIONS:
-                starts.append(pos)
-                ends.append((px + ux * wall.range_m, py + uy * wall.range_m, pz))
-        if outwash is not None:
-            starts.append(pos)
-            ends.append((px, py, pz - outwash.ray_length_m))
-        if not starts:
-            return [NO_HIT] * 4, [NO_HIT] * 4, (NO_HIT,) * 4, NO_HIT
-        hits = pb.rayTestBatch(
-            starts, ends, collisionFilterMask=WORLD_GROUP, physicsClientId=self._cid
-        )
-        i = 0
+        """Rotor heights, ceiling distances, wall distances and the centre's height: the
+        vertical ones from `VerticalRays` (cast only when they can have changed), the walls'
+        horizontal rays every step."""
         heights = ceilings = [NO_HIT] * 4
-        if down is not None:
-            heights = [h[2] * down if h[0] >= 0 else NO_HIT for h in hits[0:4]]
-            i = 4
-        if ce is not None:
-            ceilings = [h[2] * ce.ray_length_m if h[0] >= 0 else NO_HIT for h in hits[i : i + 4]]
-            i += 4
-        walls: tuple[float, ...] = (NO_HIT,) * 4
-        if wall is not None:
-            walls = tuple(h[2] * wall.range_m if h[0] >= 0 else NO_HIT for h in hits[i : i + 4])
-            i += 4
         below = NO_HIT
-        if outwash is not None and hits[i][0] >= 0:
-            below = hits[i][2] * outwash.ray_length_m
+        rays = self._vertical_rays
+        if self._hub_rays_only:  # the usual case: rotor heights alone
+            px, py, pz = pos
+            heights = rays.distances([(px + ox, py + oy, pz + oz) for ox, oy, oz in offsets])
+        elif rays is not None:
+            px, py, pz = pos
+            hubs = [(px + ox, py + oy, pz + oz) for ox, oy, oz in offsets]
+            points = []
+            if self._down_m is not None:
+                points += hubs
+            if self._ce is not None:
+                points += hubs
+            if self._outwash is not None:
+                points.append((px, py, pz))
+            d = rays.distances(points)
+            i = 0
+            if self._down_m is not None:
+                heights, i = d[0:4], 4
+            if self._ce is not None:
+                ceilings, i = d[i : i + 4], i + 4
+            if self._outwash is not None:
+                below = d[i]
+        walls: tuple[float, ...] = (NO_HIT,) * 4
+        wall = self.world.effects.wall_effect
+        if wall is not None:
+            px, py, pz = pos
+            ends = [
+                (px + ux * wall.range_m, py + uy * wall.range_m, pz)
+                for ux, uy, _ in WALL_DIRECTIONS
+            ]
+            hits = pb.rayTestBatch(
+                [pos] * 4,
+                ends,
+                numThreads=1,
+                collisionFilterMask=WORLD_GROUP,
+                physicsClientId=self._cid,
+            )
+            walls = tuple(h[2] * wall.range_m if h[0] >= 0 else NO_HIT for h in hits)
         return heights, ceilings, walls, below
 
     # -- reading ------------------------------------------------------------------------

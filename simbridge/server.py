@@ -10,14 +10,16 @@ autopilot that takes seconds to boot finds it where the world file put it.
 
 from __future__ import annotations
 
+import contextlib
+import os
 import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from simbridge import transport
 from simbridge.hil import ActuatorCommand, HilEncoder, decode_actuators, mavlink
 from simbridge.physics import Simulation
-from simbridge.spin import SpinPolicy
 from simbridge.vehicle import Vehicle
 from simbridge.wire import FrameReader
 from simbridge.world import World
@@ -27,6 +29,7 @@ from simbridge.world import World
 class ServerOptions:
     host: str = "127.0.0.1"
     port: int = 4560  # 0: an ephemeral port, printed when listening
+    unix_path: str | None = None  # listen on this Unix-domain socket instead of TCP
     speedup: float | None = 1.0  # simulated seconds per wall second; None: as fast as possible
     timeout_s: float = 10.0  # longest wait for an autopilot's reply in lockstep
     wait: bool = False  # after an autopilot leaves, wait for the next one (a fresh world)
@@ -66,19 +69,20 @@ class SimServer:
         self.world, self.vehicle, self.options, self.say = world, vehicle, options, say
         self.counters = LinkCounters()
         self._reader = FrameReader(mavlink)
-        self._spin = SpinPolicy()
+        self._recv_timeout_s = 0.0  # the SO_RCVTIMEO now set on the connection
         self._listener: socket.socket | None = None
         self.sim_time_s = 0.0
         self.wall_s = 0.0
 
-    def listen(self) -> int:
-        """Bind and listen; returns the port (useful with port 0)."""
-        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        s.bind((self.options.host, self.options.port))
-        s.listen(1)
-        self._listener = s
-        return s.getsockname()[1]
+    def listen(self) -> str:
+        """Bind and listen; returns the URL an autopilot connects to (`tcp:HOST:PORT`, the
+        port chosen with port 0, or `unix:PATH`)."""
+        o = self.options
+        if o.unix_path is not None:
+            self._listener = transport.listen(transport.UNIX, o.unix_path)
+            return f"unix:{o.unix_path}"
+        self._listener = transport.listen(transport.TCP, o.host, o.port)
+        return f"tcp:{o.host}:{self._listener.getsockname()[1]}"
 
     def serve(self, on_end: Callable[[LinkEnded], None] | None = None) -> LinkEnded:
         """Serve one autopilot (or, with `wait`, one after another, each in a fresh world)
@@ -92,7 +96,9 @@ class SimServer:
                 # at once (building it can take seconds on a loaded machine)
                 with Simulation(self.world, self.vehicle, held=True) as sim:
                     conn, _ = self._listener.accept()
-                    conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    transport.blocking(conn)
+                    transport.set_send_timeout(conn, self.options.timeout_s)
+                    self._recv_timeout_s = 0.0
                     self.counters, self._reader = LinkCounters(), FrameReader(mavlink)
                     try:
                         self._run(conn, sim)
@@ -105,6 +111,9 @@ class SimServer:
                         conn.close()
         finally:
             self._listener.close()
+            if self.options.unix_path is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(self.options.unix_path)
 
     def summary(self, reason: str) -> str:
         c = self.counters
@@ -151,8 +160,7 @@ class SimServer:
 
     def _send(self, conn: socket.socket, data: bytes) -> None:
         try:
-            conn.settimeout(self.options.timeout_s)  # blocking again after a poll
-            conn.sendall(data)
+            conn.sendall(data)  # blocking; SO_SNDTIMEO bounds a peer that stops reading
         except OSError:
             raise LinkEnded("autopilot disconnected") from None
 
@@ -160,25 +168,30 @@ class SimServer:
         self, conn: socket.socket, wait_s: float, required: bool, not_before_us: int = 0
     ) -> ActuatorCommand | None:
         """The latest HIL_ACTUATOR_CONTROLS answering a step at or after `not_before_us`,
-        within `wait_s`; counts and drops everything else, stale replies included (a reply
-        that arrives a step late must not leave the autopilot one step behind for good)."""
-        if wait_s > 0.0:
-            spin_s = self._spin.spin_s()  # simbridge/spin.py: only on an otherwise idle machine
-            command = self._poll(conn, spin_s, not_before_us) if spin_s else None
-            if command is not None:
-                return command
+        within `wait_s` (0: only what has already arrived); counts and drops everything
+        else, stale replies included (a reply that arrives a step late must not leave the
+        autopilot one step behind for good). The wait is a blocking read in the kernel."""
         deadline = time.perf_counter() + wait_s
+        first = True
         while True:
-            remaining = deadline - time.perf_counter()
             try:
-                conn.settimeout(max(remaining, 0.0))  # 0: a non-blocking poll
-                data = conn.recv(65536)
-            except (TimeoutError, BlockingIOError):
-                if required:
-                    raise LinkEnded(
-                        f"no HIL_ACTUATOR_CONTROLS for {wait_s:g} s", clean=False
-                    ) from None
-                return None
+                if wait_s <= 0.0:
+                    data = transport.recv_now(conn)
+                    if data is None:
+                        return None
+                else:
+                    # the kernel's bound: the whole wait, then (after a part of a message)
+                    # what is left of it; set only when it changes
+                    bound = wait_s if first else deadline - time.perf_counter()
+                    if bound <= 0.0:
+                        return self._timed_out(wait_s, required)
+                    if (bound != self._recv_timeout_s) if first else (bound < self._recv_timeout_s):
+                        transport.set_recv_timeout(conn, bound)
+                        self._recv_timeout_s = bound
+                    first = False
+                    data = conn.recv(65536)
+            except (BlockingIOError, TimeoutError):
+                return self._timed_out(wait_s, required)
             except OSError:
                 raise LinkEnded("autopilot disconnected") from None
             if not data:
@@ -187,23 +200,10 @@ class SimServer:
             if command is not None:
                 return command
 
-    def _poll(
-        self, conn: socket.socket, spin_s: float, not_before_us: int
-    ) -> ActuatorCommand | None:
-        conn.setblocking(False)
-        end = time.perf_counter() + spin_s
-        while time.perf_counter() < end:
-            try:
-                data = conn.recv(65536)
-            except BlockingIOError:
-                continue
-            except OSError:
-                raise LinkEnded("autopilot disconnected") from None
-            if not data:
-                raise LinkEnded("autopilot disconnected")
-            command = self._parse(data, not_before_us)
-            if command is not None:
-                return command
+    @staticmethod
+    def _timed_out(wait_s: float, required: bool) -> None:
+        if required:
+            raise LinkEnded(f"no HIL_ACTUATOR_CONTROLS for {wait_s:g} s", clean=False)
         return None
 
     def _parse(self, data: bytes, not_before_us: int) -> ActuatorCommand | None:

@@ -246,7 +246,7 @@ def test_an_autopilot_starved_before_its_first_reply_knows_it_is_behind_until_ca
     def waiting_bytes() -> int:
         return struct.unpack("i", fcntl.ioctl(link._sock, termios.FIONREAD, pending))[0]
 
-    wait_for(lambda: waiting_bytes() > 4000, "a backlog of ticks", proc)  # tens of ticks
+    wait_for(lambda: waiting_bytes() > 10000, "a backlog of ticks", proc)  # tens of ticks
     channels = load_vehicle().actuator_channels
     times, behind = [], []
     for _ in range(400):

@@ -23,7 +23,9 @@ def add_parser(sub: Any) -> None:
         help="run the autopilot: PX4 simulator protocol to the sim, MAVLink to ground stations",
     )
     p.add_argument(
-        "--sim", default="tcp:127.0.0.1:4560", help="simulator URL (default: tcp:127.0.0.1:4560)"
+        "--sim",
+        default="tcp:127.0.0.1:4560",
+        help="simulator URL, tcp:HOST:PORT or unix:PATH (default: tcp:127.0.0.1:4560)",
     )
     p.add_argument("--mission", type=Path, help="a mission file to load before any upload")
     p.add_argument(

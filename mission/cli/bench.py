@@ -19,6 +19,9 @@ def add_parser(sub: Any) -> None:
     b.add_argument(
         "--seconds", type=float, default=20.0, help="simulated seconds per figure (default: 20)"
     )
+    b.add_argument(
+        "--repeat", type=int, default=5, help="runs of each figure and reference (default: 5)"
+    )
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.add_argument("--out", type=Path, help="also write the JSON to this file")
     b.set_defaults(func=cmd_bench)
@@ -72,20 +75,31 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return 0
     from simbridge.bench import bench_sim
 
-    result = bench_sim(args.world, args.seconds)
+    if args.repeat < 1:
+        raise ConfigError(f"--repeat: {args.repeat} must be at least 1")
+    result = bench_sim(args.world, args.seconds, args.repeat)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(result, indent=2) + "\n")
     if args.json:
         print(json.dumps(result))
     else:
+        r = result
         print(
-            f"physics:  {result['physics_rtf']:.1f}x real time "
-            f"({result['physics_us_per_step']:.1f} us per {result['physics_hz']} Hz step, "
-            f"effects: {', '.join(result['effects']) or 'none'})"
+            f"physics:  {r['physics_rtf']:.1f}x real time "
+            f"({r['physics_us_per_step']:.1f} us per {r['physics_hz']} Hz step, "
+            f"effects: {', '.join(r['effects']) or 'none'}); bare quadrotor loop "
+            f"{r['bare_loop_rtf']:.1f}x ({r['bare_loop_us_per_step']:.1f} us): "
+            f"{r['physics_ratio']:.2f} of it"
         )
         print(
-            f"lockstep: {result['lockstep_rtf']:.1f}x real time "
-            f"({result['lockstep_us_per_step']:.0f} us per {result['control_hz']} Hz round trip)"
+            f"lockstep: {r['lockstep_rtf']:.1f}x real time "
+            f"({r['lockstep_us_per_step']:.0f} us per {r['control_hz']} Hz round trip); "
+            f"pymavlink ping-pong {r['pingpong_rtf']:.1f}x "
+            f"({r['pingpong_us_per_step']:.0f} us): {r['lockstep_ratio']:.2f} of it"
+        )
+        print(
+            f"medians of {r['repeat']} interleaved runs; load average "
+            f"{r['load_average'][0]:.2f} before, {r['load_average'][1]:.2f} after"
         )
     return 0

@@ -26,6 +26,12 @@ def add_parser(sub: Any) -> None:
         "--port", type=port, default=4560, help="TCP port, 0 for any free one (default: 4560)"
     )
     p.add_argument(
+        "--unix",
+        metavar="PATH",
+        help="listen on a Unix-domain socket at PATH instead of TCP (an autopilot of ours "
+        "connects with --sim unix:PATH; the same messages, a shorter way through the kernel)",
+    )
+    p.add_argument(
         "--start", metavar="X,Y,Z", help="start position in metres, overriding the world's"
     )
     p.add_argument(
@@ -88,6 +94,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         ServerOptions(
             host=args.host,
             port=args.port,
+            unix_path=args.unix,
             speedup=args.speedup,
             timeout_s=args.timeout,
             wait=args.wait,
@@ -95,14 +102,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
         ),
     )
     try:
-        port = server.listen()
+        url = server.listen()
     except OSError as err:
-        print(
-            f"groundfx sim: cannot listen on {args.host}:{args.port}: {err.strerror}",
-            file=sys.stderr,
-        )
+        where = f"unix:{args.unix}" if args.unix else f"tcp:{args.host}:{args.port}"
+        print(f"groundfx sim: cannot listen on {where}: {err.strerror}", file=sys.stderr)
         return 1
-    print(f"groundfx sim: listening on tcp:{args.host}:{port}", flush=True)
+    print(f"groundfx sim: listening on {url}", flush=True)
     signal.signal(signal.SIGTERM, terminate)
     # Ctrl-C even where SIGINT came in ignored (a script's background job, nohup): Python then
     # leaves it ignored, and a simulator told to stop would run on

@@ -10,6 +10,7 @@ z* = R sqrt(rho) / 4 (thesis section 3.3.1; 0.02 m for rho = 1 and 2).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +63,29 @@ def ground_effect_force_n(
 ) -> float:
     """Equation 3.4: the vertical force one rotor gains at `height_m` above the surface."""
     return rotor_thrust_n * thrust_gain(height_m, rho, rotor_radius_m, cutoff_m)
+
+
+def ground_effect_forces_n(
+    rotor_thrusts_n: Sequence[float],  # four rotors
+    heights_m: Sequence[float],
+    rho: float,
+    rotor_radius_m: float,
+    cutoff_m: float,
+    reach_m: float,
+) -> list[float]:
+    """Equation 3.4 for every rotor in one call (the simulator's physics step): the same
+    values as `ground_effect_force_n`, 0 where the height is beyond `reach_m` (or none)."""
+    k = rho * rotor_radius_m * rotor_radius_m / 16.0  # rho (R / 4z)^2 = k / z^2
+    f0, f1, f2, f3 = rotor_thrusts_n
+    h0, h1, h2, h3 = heights_m
+    out = []
+    for f, h in ((f0, h0), (f1, h1), (f2, h2), (f3, h3)):
+        if h > reach_m:
+            out.append(0.0)
+            continue
+        z = h if h > cutoff_m else cutoff_m
+        out.append(f * (1.0 / (1.0 - k / (z * z)) - 1.0))
+    return out
 
 
 def hover_rotor_speed_in_ground_effect_rad_s(
