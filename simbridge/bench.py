@@ -117,15 +117,15 @@ def pingpong_rtf(
     world_name: str, vehicle: Vehicle, control_period_s: float, seconds: float
 ) -> dict[str, Any]:
     """The reference: `simbridge.pingpong` with the same client, as many steps."""
+    steps = max(1, round(seconds / control_period_s))
     cmd = [sys.executable, "-m", "simbridge.pingpong", "--world", world_name]
-    cmd += ["--altitude", str(BENCH_ALTITUDE_M)]
+    cmd += ["--altitude", str(BENCH_ALTITUDE_M), "--steps", str(steps)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None
     line = proc.stdout.readline()
     if not line.startswith(LISTENING):
         proc.kill()
         raise SimProcessError(f"the ping-pong reference did not start: {line.strip()}")
-    steps = max(1, round(seconds / control_period_s))
     command = constant(
         hover_fraction(vehicle.hover_rotor_speed_rad_s, vehicle.max_rotor_speed_rad_s)
     )

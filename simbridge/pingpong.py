@@ -1,20 +1,21 @@
 """The lockstep benchmark's reference: a plain pymavlink ping-pong of the same messages.
 
-`python -m simbridge.pingpong --world W` listens like `groundfx sim` and, for every step,
-packs with pymavlink the very messages the simulator sends for such a step (taken from a
-short flight of the real encoder beforehand, then cycled), sends them, and waits in a
-blocking read for the client's HIL_ACTUATOR_CONTROLS, parsed with pymavlink. No physics,
-no sensors: what the wire and pymavlink cost, the ceiling a lockstep simulator written
-with pymavlink could reach. `groundfx bench sim` runs the same minimal client against both.
+`python -m simbridge.pingpong --world W --steps N` serves N steps the way a simulator
+written with pymavlink would: its own connection (`mavutil`, `tcpin:`), and each step the
+very messages our simulator sends for such a step (taken from a short flight of the real
+encoder beforehand, then cycled) sent with `mav.send`, then the client's
+HIL_ACTUATOR_CONTROLS awaited with `recv_match`. No physics, no sensors: what the wire and
+pymavlink cost. `groundfx bench sim` runs the same minimal client against both.
 """
 
 from __future__ import annotations
 
 import argparse
-import socket
 import sys
 import time
 from typing import Any
+
+from pymavlink import mavutil
 
 from simbridge.hil import HilEncoder, mavlink
 from simbridge.physics import Simulation
@@ -42,45 +43,32 @@ def sample_steps(world_name: str, altitude_m: float) -> list[list[Any]]:
     return steps
 
 
-def serve(sock: socket.socket, steps: list[list[Any]]) -> int:
-    """Until the client leaves: send a step's messages packed by pymavlink, wait for one
-    HIL_ACTUATOR_CONTROLS. Returns the steps served."""
-    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=200)
-    parser = mavlink.MAVLink(None)
-    served = 0
-    while True:
-        buffer = b"".join(m.pack(mav) for m in steps[served % len(steps)])
-        try:
-            sock.sendall(buffer)
-            answered = False
-            while not answered:
-                data = sock.recv(65536)
-                if not data:
-                    return served
-                for m in parser.parse_buffer(data) or ():
-                    answered |= m.get_type() == "HIL_ACTUATOR_CONTROLS"
-        except OSError:
+def serve(conn: Any, steps: list[list[Any]], count: int, timeout_s: float) -> int:
+    """`count` steps (fewer if the client stops answering); returns the steps served."""
+    for served in range(count):
+        for m in steps[served % len(steps)]:
+            conn.mav.send(m)
+        if conn.recv_match(type="HIL_ACTUATOR_CONTROLS", blocking=True, timeout=timeout_s) is None:
             return served
-        served += 1
+    return count
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m simbridge.pingpong", description=__doc__)
     p.add_argument("--world", default="default")
+    p.add_argument("--steps", type=int, required=True, help="steps to serve")
     p.add_argument("--altitude", type=float, default=0.1, help="hover height of the sample, m")
     args = p.parse_args(argv)
     steps = sample_steps(args.world, args.altitude)
-    listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    listener.bind(("127.0.0.1", 0))
-    listener.listen(1)
-    print(f"{LISTENING}127.0.0.1:{listener.getsockname()[1]}", flush=True)
-    conn, _ = listener.accept()
-    conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    conn = mavutil.mavlink_connection("tcpin:127.0.0.1:0", source_system=1, source_component=200)
+    print(f"{LISTENING}127.0.0.1:{conn.listen.getsockname()[1]}", flush=True)
+    while conn.port is None:  # mavutil accepts in recv, and drops what is sent before
+        conn.select(0.05)
+        conn.recv()
     t0 = time.perf_counter()
-    served = serve(conn, steps)
+    served = serve(conn, steps, args.steps, timeout_s=10.0)
     wall = time.perf_counter() - t0
     conn.close()
-    listener.close()
     print(f"groundfx pingpong: {served} steps in {wall:.2f} s", flush=True)
     return 0
 

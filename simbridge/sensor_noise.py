@@ -93,45 +93,68 @@ def white_sd(noise_density: float, period_s: float) -> float:
     return noise_density / math.sqrt(period_s) if period_s > 0.0 else 0.0
 
 
+NORMALS_PER_DRAW = 4096  # standard normals drawn at once: a call per value costs ~1 us
+
+
 class SensorErrors:
     """The flight's random state: turn-on biases, their walks, and the generator.
 
     The edge of the pure parameters above: one per simulated flight, advanced once per
-    control step by the HIL encoder.
+    control step by the HIL encoder. Normals come from the seeded generator in blocks, as
+    Python floats (a few values a message: numpy's per-call cost would dominate), in the
+    order one call per value would draw them: a seed gives the same errors as before.
     """
 
     def __init__(self, noise: SensorNoise, period_s: float) -> None:
         self.noise, self.period_s = noise, period_s
         self._rng = np.random.default_rng(noise.seed)
-        self.accel_bias = self._rng.normal(0.0, noise.accel_bias_sd_m_s2, 3)
-        self.gyro_bias = self._rng.normal(0.0, noise.gyro_bias_sd_rad_s, 3)
+        self._normals: list[float] = []
+        self._next = 0
+        self.accel_bias = self._vector3(noise.accel_bias_sd_m_s2)
+        self.gyro_bias = self._vector3(noise.gyro_bias_sd_rad_s)
         self._accel_sd = white_sd(noise.accel_noise_density, period_s)
         self._gyro_sd = white_sd(noise.gyro_noise_density, period_s)
         self._accel_walk = noise.accel_bias_walk * math.sqrt(period_s)
         self._gyro_walk = noise.gyro_bias_walk * math.sqrt(period_s)
         self.ideal = noise.is_ideal
 
-    def _normal(self, sd: float, n: int = 3) -> np.ndarray:
-        return self._rng.normal(0.0, sd, n) if sd > 0.0 else np.zeros(n)
+    def _normal(self) -> float:
+        i = self._next
+        if i == len(self._normals):
+            self._normals = self._rng.standard_normal(NORMALS_PER_DRAW).tolist()
+            i = 0
+        self._next = i + 1
+        return self._normals[i]
+
+    def _vector3(self, sd: float) -> Vec3:
+        if sd <= 0.0:
+            return (0.0, 0.0, 0.0)
+        return (sd * self._normal(), sd * self._normal(), sd * self._normal())
 
     def imu(self, specific_force_flu: Vec3, rates_flu: Vec3) -> tuple[Vec3, Vec3]:
         """One IMU sample (body FLU) with bias and white noise; the biases walk one step."""
         if self.ideal:
             return specific_force_flu, rates_flu
-        self.accel_bias = self.accel_bias + self._normal(self._accel_walk)
-        self.gyro_bias = self.gyro_bias + self._normal(self._gyro_walk)
-        a = np.asarray(specific_force_flu) + self.accel_bias + self._normal(self._accel_sd)
-        w = np.asarray(rates_flu) + self.gyro_bias + self._normal(self._gyro_sd)
-        return (float(a[0]), float(a[1]), float(a[2])), (float(w[0]), float(w[1]), float(w[2]))
+        ab, gb = self.accel_bias, self.gyro_bias
+        aw, gw = self._vector3(self._accel_walk), self._vector3(self._gyro_walk)
+        ab = (ab[0] + aw[0], ab[1] + aw[1], ab[2] + aw[2])
+        gb = (gb[0] + gw[0], gb[1] + gw[1], gb[2] + gw[2])
+        self.accel_bias, self.gyro_bias = ab, gb
+        an, gn = self._vector3(self._accel_sd), self._vector3(self._gyro_sd)
+        a, w = specific_force_flu, rates_flu
+        return (
+            (a[0] + ab[0] + an[0], a[1] + ab[1] + an[1], a[2] + ab[2] + an[2]),
+            (w[0] + gb[0] + gn[0], w[1] + gb[1] + gn[1], w[2] + gb[2] + gn[2]),
+        )
 
     def vector(self, value: Vec3, sd: float) -> Vec3:
         if sd <= 0.0:
             return value
-        e = self._normal(sd)
-        return (value[0] + float(e[0]), value[1] + float(e[1]), value[2] + float(e[2]))
+        e = self._vector3(sd)
+        return (value[0] + e[0], value[1] + e[1], value[2] + e[2])
 
     def scalar(self, value: float, sd: float) -> float:
-        return value + float(self._rng.normal(0.0, sd)) if sd > 0.0 else value
+        return value + sd * self._normal() if sd > 0.0 else value
 
     def range_m(self, range_m: float) -> float:
         n = self.noise
@@ -144,7 +167,8 @@ class SensorErrors:
         sd = self.noise.mocap_attitude_rad
         if sd <= 0.0:
             return quaternion
-        e = self._normal(sd) * 0.5
+        e0, e1, e2 = self._vector3(sd)
+        e = (e0 * 0.5, e1 * 0.5, e2 * 0.5)
         w, x, y, z = quaternion
         # q * dq, dq = (1, e) to first order, renormalised
         qw = w - x * e[0] - y * e[1] - z * e[2]
@@ -152,4 +176,4 @@ class SensorErrors:
         qy = y + w * e[1] + z * e[0] - x * e[2]
         qz = z + w * e[2] + x * e[1] - y * e[0]
         norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        return (float(qw / norm), float(qx / norm), float(qy / norm), float(qz / norm))
+        return (qw / norm, qx / norm, qy / norm, qz / norm)

@@ -59,29 +59,33 @@ class WirePacker:
         self._msgid = message_class.id
         self._src = (src_system, src_component)
         self._seq = seq
+        # without arrays, the wire order is a permutation of the arguments
+        self._scalar_order = (
+            None if any(length for _, length in self._order) else [i for i, _ in self._order]
+        )
 
     def pack(self, *values: Any) -> bytes:
-        flat: list[Any] = []
-        for index, length in self._order:
-            if length:
-                flat.extend(values[index])
-            else:
-                flat.append(values[index])
+        order = self._scalar_order
+        if order is not None:
+            flat: list[Any] = [values[i] for i in order]
+        else:
+            flat = []
+            for index, length in self._order:
+                if length:
+                    flat.extend(values[index])
+                else:
+                    flat.append(values[index])
         # MAVLink 2 drops trailing zero bytes of the payload, keeping at least one.
         payload = self._struct.pack(*flat).rstrip(b"\0") or b"\0"
         msgid = self._msgid
-        header = _HEADER.pack(
-            MAVLINK2_STX,
-            len(payload),
-            0,
-            0,
-            self._seq.next(),
-            self._src[0],
-            self._src[1],
-            msgid & 0xFFFF,
-            msgid >> 16,
+        seq = self._seq
+        v = seq.value
+        seq.value = (v + 1) & 0xFF
+        src = self._src
+        body = _HEADER.pack(
+            MAVLINK2_STX, len(payload), 0, 0, v, src[0], src[1], msgid & 0xFFFF, msgid >> 16
         )
-        body = header + payload
+        body += payload
         return body + _CRC.pack(_crc(body[1:] + self._crc_extra))
 
 
