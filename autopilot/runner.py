@@ -213,8 +213,6 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 nav.resting()
             state = nav.state()
             height = nav.height_m()
-            actual = true_state(step, config.origin) or state
-            true_height = true_height_m(step, actual, nav.terrain_m)
             wall = time.monotonic()
             inp = StepInput(t, wall, state, height, resting_height, nav.position_lost(t))
             if not rows and config.mission:
@@ -265,10 +263,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             )
             cmd_state = cmd.state
             airborne = height > resting_height + AIRBORNE_MARGIN_M
-            # the flight log's rows: in the air by the truth, as the recording's reader judges
-            truly_airborne = true_height > resting_height + AIRBORNE_MARGIN_M
-            if config.on_step is not None and truly_airborne and cmd_state.phase in RECORDED_PHASES:
-                config.on_step(t, step, actual, speeds)
+            applied = speeds  # the rotor speeds of the interval that ended at t
             sample_hz = config.record_hz or online.sample_hz
             if (
                 sample_hz > 0.0
@@ -277,7 +272,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 and cmd_state.phase in RECORDED_PHASES
             ):
                 row = learning_sample(
-                    t, step, state, height, speeds, vehicle, nav.accel_bias_m_s2()
+                    t, step, state, height, applied, vehicle, nav.accel_bias_m_s2()
                 )
                 online.submit(row)
                 if config.record_hz > 0.0:
@@ -334,6 +329,13 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 integral = (0.0, 0.0, 0.0)  # rotors off: the next flight starts afresh
             last_t = t
             link.send(t_us, tuple(n / n_max for n in speeds), channels, cmd.armed)
+            # off the control path from here: the simulator steps meanwhile
+            actual = true_state(step, config.origin) or state
+            true_height = true_height_m(step, actual, nav.terrain_m)
+            # the flight log's rows: in the air by the truth, as the recording's reader judges
+            truly_airborne = true_height > resting_height + AIRBORNE_MARGIN_M
+            if config.on_step is not None and truly_airborne and cmd_state.phase in RECORDED_PHASES:
+                config.on_step(t, step, actual, applied)
             station.after_step(cmd_state, inp, cmd.reached, cmd.events)
             if cmd_state.plan is not drawn_plan:
                 drawn_plan = cmd_state.plan

@@ -1,7 +1,9 @@
-"""`groundfx bench sitl`: simulator and autopilot as separate processes over MAVLink."""
+"""`groundfx bench sitl`: simulator and autopilot as separate processes over MAVLink, beside
+a reference measured in the same run (a pymavlink ping-pong of the same messages)."""
 
 from __future__ import annotations
 
+import os
 import statistics
 import tempfile
 from pathlib import Path
@@ -9,20 +11,33 @@ from typing import Any
 
 from mission import EXAMPLES_DIR
 from mission.fly import fly
+from simbridge.bench import pingpong_rtf
+from simbridge.vehicle import load_vehicle
+from simbridge.world import load_world, resolve_world_path
 
 BENCH_MISSION = EXAMPLES_DIR / "low_hover.yaml"
 
 
-def bench_sitl(world: str = "default", repeat: int = 3) -> dict[str, Any]:
+def bench_sitl(world: str = "default", repeat: int = 5) -> dict[str, Any]:
     """250 Hz control, 1000 Hz physics, ground effect on, the analytic model, lockstep.
 
     Flies the mission `repeat` times with the recorder off and on, alternating (the load of
     the machine drifts); `rtf` and the rest are the median flight with recording off;
-    `recording_rtf_ratio` the median over the pairs of rtf on / rtf off."""
+    `recording_rtf_ratio` the median over the pairs of rtf on / rtf off. Between the pairs,
+    the reference: `simbridge.pingpong` (pymavlink, the same messages, no physics, no
+    autopilot) for as many simulated seconds, against the benchmark's minimal client."""
     off: list[dict[str, Any]] = []
     on: list[dict[str, Any]] = []
+    reference: list[float] = []
+    world_obj = load_world(world)
+    vehicle = load_vehicle(world_obj.vehicle)
+    load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(repeat):
+            ping = pingpong_rtf(
+                str(resolve_world_path(world)), vehicle, world_obj.control_period_s, 16.0
+            )
+            reference.append(ping["pingpong_rtf"])
             off.append(
                 fly(BENCH_MISSION, world, "analytic", speedup="max", via_gcs=False, record=False)
             )
@@ -68,4 +83,7 @@ def bench_sitl(world: str = "default", repeat: int = 3) -> dict[str, Any]:
         ),
         "rtf_runs_off": [s["rtf"] for s in off],
         "rtf_runs_on": [s["rtf"] for s in on],
+        "pingpong_rtf": statistics.median(reference),
+        "recording_on_to_pingpong": rtf_on / statistics.median(reference),
+        "load_average": (load_before, os.getloadavg()[0]),
     }

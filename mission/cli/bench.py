@@ -40,7 +40,7 @@ def add_parser(sub: Any) -> None:
     b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")
     b.add_argument("--world", default="default")
     b.add_argument(
-        "--repeat", type=int, default=3, help="flights with recording off and on each (default: 3)"
+        "--repeat", type=int, default=5, help="flights with recording off and on each (default: 5)"
     )
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench)
