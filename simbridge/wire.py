@@ -98,6 +98,10 @@ class WireUnpacker:
         self._layout = _array_layout(message_class)
         types = dict(zip(message_class.fieldnames, message_class.fieldtypes, strict=True))
         self._text = tuple(name for name, kind in types.items() if kind == "char")
+        # without arrays a payload's values are its fields in wire order: one zip
+        self._names = (
+            None if any(count for _, count in self._layout) else [n for n, _ in self._layout]
+        )
 
     def decode_payload(self, payload: bytes) -> dict[str, Any] | None:
         """The fields of one payload (MAVLink 2 may have dropped its trailing zeros)."""
@@ -107,7 +111,12 @@ class WireUnpacker:
         elif length > self._size:
             return None
         values = self._struct.unpack(payload)
-        fields: dict[str, Any] = {}
+        if self._names is not None:
+            fields = dict(zip(self._names, values, strict=True))
+            for name in self._text:
+                fields[name] = fields[name].split(b"\0", 1)[0].decode("utf-8", "replace")
+            return fields
+        fields = {}
         i = 0
         for name, count in self._layout:
             if count:

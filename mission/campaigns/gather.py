@@ -4,6 +4,7 @@ random waypoints in a simulator process, recording 100 Hz learning samples."""
 from __future__ import annotations
 
 import dataclasses
+import tempfile
 from pathlib import Path
 
 import yaml
@@ -15,7 +16,7 @@ from autopilot.runner import AutopilotConfig, fly_mission
 from learner.dataset import save_dataset
 from mission.campaigns.sampling import thesis_waypoints
 from simbridge.effects.ground import GroundEffectParams
-from simbridge.launch import finish, start_sim
+from simbridge.launch import finish, spawn_local_sim
 from simbridge.physics import with_effects
 from simbridge.vehicle import load_vehicle
 from simbridge.world import load_world, resolve_world_path
@@ -53,9 +54,11 @@ def gather(
         bar.update(n - counted[0])
         counted[0] = n
 
-    sim, port = start_sim(world_path, speedup="max", lockstep_start=True)
+    socket_dir = tempfile.TemporaryDirectory(prefix="groundfx-")
+    socket_path = Path(socket_dir.name) / "sim.sock"
+    sim = spawn_local_sim(world_path, socket_path)  # starts beside this process's flight
     config = AutopilotConfig(
-        sim_url=f"tcp:127.0.0.1:{port}",
+        sim_url=f"unix:{socket_path}",
         vehicle=vehicle,
         params=params,
         origin=origin,
@@ -71,6 +74,7 @@ def gather(
     finally:
         bar.close()
         finish(sim)
+        socket_dir.cleanup()
     if flight.samples is None or len(flight.samples) < samples:
         got = 0 if flight.samples is None else len(flight.samples)
         raise RuntimeError(f"the flight ended ({flight.ended}) after {got} of {samples} samples")
