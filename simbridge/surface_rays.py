@@ -71,36 +71,36 @@ class VerticalRays:
         self._cid, self._mask = physics_client, collision_mask
         self._footprints = tuple(footprints)
         self._signs, self._reach = tuple(signs), tuple(reach_m)
-        self._open = not self._footprints  # nothing but the ground: no edge to cross
         self._cast_at: list[Point] = []
-        self._cast_m: list[float] = []
+        self._levels: list[float] = []
         self._lengths = tuple(r + SLACK_M for r in self._reach)
         self._safe2: list[float] = []  # squared safe radius of each point
         self.casts = 0  # batches cast, for the benchmark
 
     def distances(self, points: Sequence[Point]) -> list[float]:
-        if not self._cast_at or self._moved_off(points):
-            self._cast(points)
+        if self._cast_at:
+            out = []
+            # one pass: still within its safe radius and the vertical slack, each point's
+            # distance is its surface's level less its height (lengths equal by
+            # construction; a strict zip costs a check per call on the hot path)
+            for (x, y, z), (x0, y0, z0), level, sign, reach, r2 in zip(  # noqa: B905
+                points, self._cast_at, self._levels, self._signs, self._reach, self._safe2
+            ):
+                dx, dy = x - x0, y - y0
+                if dx * dx + dy * dy >= r2 or abs(z - z0) >= SLACK_M:
+                    break
+                h = sign * (level - z)
+                out.append(NO_HIT if h > reach else (h if h > 0.0 else 0.0))
+            else:
+                return out
+        self._cast(points)
         out = []
-        # lengths equal by construction; strict zips cost a check per call on the hot path
-        for (_, _, z), (_, _, z0), d, sign, reach in zip(  # noqa: B905
-            points, self._cast_at, self._cast_m, self._signs, self._reach
+        for (_, _, z), level, sign, reach in zip(  # noqa: B905
+            points, self._levels, self._signs, self._reach
         ):
-            h = d - sign * (z - z0)
+            h = sign * (level - z)
             out.append(NO_HIT if h > reach else (h if h > 0.0 else 0.0))
         return out
-
-    def _moved_off(self, points: Sequence[Point]) -> bool:
-        """Whether a point left its safe radius or moved SLACK_M vertically."""
-        for (x, y, z), (x0, y0, z0), r2 in zip(points, self._cast_at, self._safe2):  # noqa: B905
-            if abs(z - z0) >= SLACK_M:
-                return True
-            if self._open:
-                continue
-            dx, dy = x - x0, y - y0
-            if dx * dx + dy * dy >= r2:
-                return True
-        return False
 
     def _cast(self, points: Sequence[Point]) -> None:
         ends = [
@@ -115,10 +115,14 @@ class VerticalRays:
             physicsClientId=self._cid,
         )
         self._cast_at = list(points)
-        self._cast_m = [
-            h[2] * length if h[0] >= 0 else NO_HIT
-            for h, length in zip(hits, self._lengths, strict=True)
+        # the level of the surface each ray met (+-inf: none within its length)
+        self._levels = [
+            z + sign * (h[2] * length if h[0] >= 0 else NO_HIT)
+            for (_, _, z), h, sign, length in zip(
+                points, hits, self._signs, self._lengths, strict=True
+            )
         ]
         safe = [edge_distance_m(x, y, self._footprints) - EDGE_MARGIN_M for x, y, _ in points]
-        self._safe2 = [d * d if d > 0.0 else 0.0 for d in safe]
+        # within the margin: cast again at every call there
+        self._safe2 = [d * d if d > 0.0 else -1.0 for d in safe]
         self.casts += 1
