@@ -22,10 +22,14 @@ def test_plot_refuses_a_bad_rho():
 
 
 def test_bench_sim_prints_its_figures_as_json():
-    result = run_groundfx("bench", "sim", "--json", "--seconds", "1")
+    result = run_groundfx("bench", "sim", "--json", "--seconds", "1", "--repeat", "1")
     assert result.returncode == 0, result.stderr
     figures = json.loads(result.stdout.strip().splitlines()[-1])
     assert figures["physics_rtf"] > 0 and figures["lockstep_rtf"] > 0
+    # each beside its reference, measured in the same run
+    assert figures["physics_ratio"] == figures["physics_rtf"] / figures["bare_loop_rtf"]
+    assert figures["lockstep_ratio"] == figures["lockstep_rtf"] / figures["pingpong_rtf"]
+    assert len(figures["load_average"]) == 2
     assert figures["effects"] == ["ground_effect"] and figures["physics_hz"] == 1000
     assert figures["control_hz"] == 250
     assert figures["physics_altitude_drift_m"] < 1e-3  # it benchmarks a hovering drone
@@ -44,3 +48,16 @@ def test_demo_shows_the_ground_effect_lifting_the_drone(tmp_path):
     assert altitudes == sorted(altitudes) and altitudes[-1] > 0.1  # it climbs out of ground effect
     assert float(rows[0][3]) == pytest.approx(predicted, rel=0.01)  # measured over MAVLink
     assert (tmp_path / "ground_effect.png").exists()
+
+
+def test_fly_writes_a_flight_log_and_ends_at_its_time_limit(tmp_path):
+    log = tmp_path / "hover.csv"
+    result = run_groundfx(
+        "fly", "mission/examples/hover.yaml", "--no-gcs", "--no-record", "--json",
+        "--flight-log", str(log), "--max-flight-s", "3",
+    )  # fmt: skip
+    summary = json.loads(result.stdout.strip().splitlines()[-1])
+    assert summary["ended"] == "mission time limit" and result.returncode == 1
+    header, *rows = [ln for ln in log.read_text().splitlines() if not ln.startswith("#")]
+    assert header.startswith("time_s,x_m,y_m,z_m") and len(rows) > 100  # airborne steps
+    assert float(rows[-1].split(",")[0]) <= 3.0

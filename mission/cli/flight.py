@@ -13,6 +13,7 @@ from mission.cli.options import (
     DEFAULT_LOGS,
     add_sensor_options,
     gcs_options,
+    max_flight_s,
     model_options,
     sensor_arguments,
     speedup,
@@ -31,6 +32,12 @@ def add_fly_parser(sub: Any) -> None:
     p.add_argument("--start", metavar="X,Y,Z", help="start position, overriding the world's")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
+    p.add_argument("--flight-log", type=Path, help="save airborne steps as a gap-diagnosis log")
+    p.add_argument(
+        "--max-flight-s",
+        type=max_flight_s,
+        help="end the flight after this many simulated seconds (default: the autopilot's 900)",
+    )
     p.add_argument(
         "--no-gcs",
         action="store_true",
@@ -110,6 +117,8 @@ def cmd_fly(args: argparse.Namespace) -> int:
         autopilot_options=extra,
         record=False if args.no_record else (args.record or True),
         sim_options=sim_options,
+        flight_log=args.flight_log,
+        max_flight_s=args.max_flight_s,
     )
     print(json.dumps(summary) if args.json else describe(summary))
     return 0 if summary["landed"] else 1
