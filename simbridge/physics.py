@@ -112,6 +112,12 @@ class Simulation:
         self._lift_off_us: int | None = None  # see time_since_takeoff_s
         self._build_vehicle()
         self._vertical_rays = self._build_rays()
+        self._horizontal_effects = (
+            fx.wall_effect is not None
+            or self._outwash is not None
+            or self._drag
+            or self._learned is not None
+        )
         self._hub_rays_only = (
             self._down_m is not None and self._ce is None and self._outwash is None
         )
@@ -295,12 +301,16 @@ class Simulation:
             self._lift_off_us = self._time_us
         m0, m1, m2, m3, m4, m5, m6, m7, m8 = m
 
-        # Rotor hubs relative to the centre of mass, in the world frame.
-        offsets = [
-            (m0 * rx + m1 * ry + m2 * rz, m3 * rx + m4 * ry + m5 * rz, m6 * rx + m7 * ry + m8 * rz)
-            for rx, ry, rz in self._rotors_body
-        ]
-        heights, ceilings, walls, below = self._ray_tests(pos, offsets)
+        # Rotor hubs relative to the centre of mass in the world frame, and where they are.
+        px, py, pz = pos
+        offsets, hubs = [], []
+        for rx, ry, rz in self._rotors_body:
+            ox = m0 * rx + m1 * ry + m2 * rz
+            oy = m3 * rx + m4 * ry + m5 * rz
+            oz = m6 * rx + m7 * ry + m8 * rz
+            offsets.append((ox, oy, oz))
+            hubs.append((px + ox, py + oy, pz + oz))
+        heights, ceilings, walls, below = self._ray_tests(pos, hubs)
 
         # Equation 3.6 in the body frame, ceiling effect as extra thrust on each rotor.
         if self._ce is not None:
@@ -347,10 +357,27 @@ class Simulation:
             force[2] += total
             self._gex_force[2] = total
         self._heights = heights
+        if self._horizontal_effects:
+            self._apply_horizontal(force, m, f, thrust, heights, walls, below)
 
-        fx = self.world.effects
-        if fx.wall_effect is not None:
-            wf = wall_force_n(fx.wall_effect, thrust, self._radius, walls)
+        pb.applyExternalForce(body, -1, force, pos, pb.WORLD_FRAME, physicsClientId=cid)
+        pb.applyExternalTorque(body, -1, (tx, ty, tz), pb.WORLD_FRAME, physicsClientId=cid)
+        pb.stepSimulation(physicsClientId=cid)
+
+    def _apply_horizontal(
+        self,
+        force: list[float],
+        m: tuple[float, ...],
+        f: Quad,
+        thrust: float,
+        heights: list[float],
+        walls: tuple[float, ...],
+        below: float,
+    ) -> None:
+        """The wall effect, the outwash, drag and a learnt residual, where the world has them."""
+        wall = self.world.effects.wall_effect
+        if wall is not None:
+            wf = wall_force_n(wall, thrust, self._radius, walls)
             force[0] += wf[0]
             force[1] += wf[1]
             self._wall_force[:] = wf
@@ -363,10 +390,6 @@ class Simulation:
             self._apply_drag(force, m, self._rotor_speeds)
         if self._learned is not None:
             self._apply_learned(force, m, f, heights)
-
-        pb.applyExternalForce(body, -1, force, pos, pb.WORLD_FRAME, physicsClientId=cid)
-        pb.applyExternalTorque(body, -1, (tx, ty, tz), pb.WORLD_FRAME, physicsClientId=cid)
-        pb.stepSimulation(physicsClientId=cid)
 
     def _apply_drag(self, force: list[float], m: tuple[float, ...], n: list[float]) -> None:
         fx = self.world.effects
@@ -416,7 +439,7 @@ class Simulation:
         self._learned_force[:] = lf
 
     def _ray_tests(
-        self, pos: tuple[float, ...], offsets: list[Vec3]
+        self, pos: tuple[float, ...], hubs: list[Vec3]
     ) -> tuple[list[float], list[float], tuple[float, ...], float]:
         """Rotor heights, ceiling distances, wall distances and the centre's height: the
         vertical ones from `VerticalRays` (cast only when they can have changed), the walls'
@@ -425,11 +448,9 @@ class Simulation:
         below = NO_HIT
         rays = self._vertical_rays
         if self._hub_rays_only:  # the usual case: rotor heights alone
-            px, py, pz = pos
-            heights = rays.distances([(px + ox, py + oy, pz + oz) for ox, oy, oz in offsets])
+            heights = rays.distances(hubs)
         elif rays is not None:
             px, py, pz = pos
-            hubs = [(px + ox, py + oy, pz + oz) for ox, oy, oz in offsets]
             points = []
             if self._down_m is not None:
                 points += hubs
