@@ -97,6 +97,7 @@ def fly(
     else:
         path = default_recording_path(mission_path, model) if record is True else record
         options += ["--record", str(path), "--record-world", str(resolve_world_path(world))]
+        options += ["--record-mission", str(mission_path)]
     options += autopilot_options  # e.g. the experiments' --online METHOD
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
@@ -193,6 +194,25 @@ def _declared(summary: dict[str, Any]) -> str:
     return f"{declared - contact:+.2f} s from contact"
 
 
+def _online_lines(summary: dict[str, Any]) -> list[str]:
+    """What the online learner did, when it ran (`--online METHOD`)."""
+    method = summary.get("online_method")
+    if method is None or method == "off":
+        return [f"  online learning: {e}" for e in summary.get("online_errors") or []]
+    first, last = summary.get("online_loss_first"), summary.get("online_loss_last")
+    loss = "" if first is None or last is None else f"; loss {first:.3g} -> {last:.3g}"
+    reasons = summary.get("online_reject_reasons") or {}
+    why = ", ".join(f"{k} {v}" for k, v in reasons.items())
+    return [
+        f"  online learning ({method}, {summary.get('online_mode')}): "
+        f"{summary.get('online_samples', 0)} samples, {summary.get('online_updates', 0)} "
+        f"updates, {summary.get('online_accepted', 0)} accepted, "
+        f"{summary.get('online_rejected', 0)} rejected{f' ({why})' if why else ''}, "
+        f"weights version {summary.get('online_version', 0)}{loss}",
+        *[f"  online learning: {e}" for e in summary.get("online_errors") or []],
+    ]
+
+
 def describe(summary: dict[str, Any]) -> str:
     """The summary for people."""
 
@@ -215,6 +235,7 @@ def describe(summary: dict[str, Any]) -> str:
             f"{fmt('est_attitude_rms_deg', 'deg', 1, 2)} RMS; height from "
             f"{summary.get('estimator_height_source', 'n/a')}",
             *[f"  {text}" for text in summary.get("failsafes") or []],
+            *_online_lines(summary),
             f"  simulated {fmt('sim_s', 's', 1, 2)} in {fmt('wall_s', 's', 1, 2)} wall: "
             f"{fmt('rtf', 'x real time')}; estimator and controller "
             f"{fmt('estimator_controller_us_p50', 'us')} p50, "

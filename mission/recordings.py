@@ -50,6 +50,11 @@ def add_record_options(p: argparse.ArgumentParser, world: bool = False) -> None:
             help="world YAML or packaged name drawn in the recording (ground and obstacles); "
             "default: flat ground",
         )
+        p.add_argument(
+            "--record-mission",
+            metavar="FILE",
+            help="the mission file a ground station uploads, named in the recording's meta",
+        )
 
 
 def record_path(args: argparse.Namespace, model: str) -> Path | None:

@@ -74,6 +74,10 @@ def test_the_recording_holds_the_trajectory_the_autopilot_flew(flown):
     np.testing.assert_allclose(flown_again[:, 0], log[:, 0], rtol=0, atol=1e-9)
     assert np.array_equal(flown_again[:, 1:], log[:, 1:], equal_nan=True)  # bit for bit
     assert recording.meta["model"] == "analytic" and recording.meta["modes"] == MODES
+    # what was flown, though a ground station uploaded the mission: file, network, learning
+    meta = recording.meta
+    assert meta["mission"].endswith("land_on_box.yaml") and meta["network"] is None
+    assert meta["online"] == "off"
     translation = recording.values("world/drone", "Transform3D:translation")  # 50 Hz, float32
     at = np.searchsorted(log[:, 0], recording.times("world/drone") - 1e-9)
     assert len(at) > summary["sim_s"] * 49

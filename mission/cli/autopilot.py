@@ -100,6 +100,7 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from autopilot.ground_models import default_network
     from autopilot.metrics import COLUMNS
     from autopilot.mission_items import Home
     from autopilot.params import ParamStore
@@ -161,11 +162,14 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, on_signal)
     recording = record_path(args, params.model()[0])
     if recording is not None:
+        model, rho = params.model()
         info = {
-            "mission": str(args.mission),
-            "model": params.model()[0],
-            "rho": params.model()[1],
-            "network": args.network,
+            "mission": str(args.mission or args.record_mission or "uploaded by a ground station"),
+            "model": model,
+            "rho": rho,
+            # the network a neural model flies (the packaged one for its rho unless named)
+            "network": (args.network or default_network(rho)) if model == "neural" else None,
+            "online": args.online or "off",
             "world": args.record_world,
             "sim": args.sim,
             "identity": args.identity,
