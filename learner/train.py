@@ -205,7 +205,9 @@ def write_outputs(result: TrainResult, out: Path) -> dict[str, Path]:
     ax.axvline(result.metrics["best_epoch"], color="0.6", ls="--", lw=0.8, label="kept")
     ax.set_xlabel("epoch")
     ax.set_ylabel("MSE (standardised targets)")
-    ax.set_title("Ground-effect network, offline training")
+    trained_on = result.net.header.get("training", {}).get("rho") or []
+    rhos = ", ".join(f"{r:g}" for r in trained_on) or "unknown"
+    ax.set_title(f"Ground-effect network {out.stem}, offline training on rho {rhos}")
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
