@@ -1,10 +1,13 @@
 """The default layout of a flight recording in the rerun viewer.
 
-Left: the 3-D world (looking at the landing point) over the event log and the status plots.
-Right, top to bottom: z against its setpoint, the true against the predicted ground effect
-(z large, x and y beside each other), then rotor speeds and controller errors in tabs. A
-newcomer sees the landing at a glance: the drone settling onto the ground in 3-D, z meeting
-its setpoint, and the green (true) and orange (predicted) ground-effect curves rising together.
+Left: the 3-D world (looking down at the landing point from above the mission) over the
+event log and the status plots. Right, top to bottom: z against its setpoint, the true
+against the predicted ground effect (z large, x and y beside each other), then rotor speeds
+and controller errors in tabs. A newcomer sees the landing at a glance: the drone settling
+onto the ground in 3-D, z meeting its setpoint, and the green (true) and orange (predicted)
+ground-effect curves rising together. The z view's range is fixed to the mission's heights,
+so a setpoint that runs away cannot squeeze the hold near the ground into a line; the
+learner's views appear only on flights that learn.
 """
 
 from __future__ import annotations
@@ -14,24 +17,52 @@ import rerun.blueprint as rrb
 from learner.flightlogs.recording import EVENTS, MAVLINK, TIMELINE, WORLD
 from simbridge.frames import Vec3
 
-EYE_OFFSET_M = (-1.6, -1.6, 1.0)  # where the 3-D camera stands, from the point it looks at
+EYE_OFFSET_M = (-1.3, -1.3, 2.2)  # where the 3-D camera stands, from the point it looks at
+DEFAULT_Z_RANGE_M = (-0.05, 1.5)  # the z view's range until a mission gives its heights
+Z_MARGIN_M = (0.05, 0.25)  # below the lowest and above the highest point of the mission
 
 
-def default_blueprint(focus_m: Vec3 = (0.0, 0.0, 0.0)) -> rrb.Blueprint:
+def z_range_m(path_m: list[Vec3] | tuple[Vec3, ...]) -> tuple[float, float]:
+    """The z view's range for a mission flown along `path_m` (the ground at 0 included)."""
+    if not path_m:
+        return DEFAULT_Z_RANGE_M
+    zs = [p[2] for p in path_m]
+    return (min(0.0, min(zs)) - Z_MARGIN_M[0], max(zs) + Z_MARGIN_M[1])
+
+
+def default_blueprint(
+    focus_m: Vec3 = (0.0, 0.0, 0.0),
+    z_view_m: tuple[float, float] = DEFAULT_Z_RANGE_M,
+    learning: bool = False,
+) -> rrb.Blueprint:
     eye = tuple(f + o for f, o in zip(focus_m, EYE_OFFSET_M, strict=True))
     world = rrb.Spatial3DView(
         origin=WORLD,
         name="world",
         eye_controls=rrb.EyeControls3D(position=eye, look_target=focus_m, eye_up=(0, 0, 1)),
     )
+    learner = (
+        [
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="plots/learner/loss", name="learner loss"),
+                rrb.TimeSeriesView(origin="plots/learner/version", name="weights version"),
+                name="learner",
+            )
+        ]
+        if learning
+        else []
+    )
     status = rrb.Tabs(
         rrb.TextLogView(origin=EVENTS, name="events"),
         rrb.TimeSeriesView(origin="plots/mode", name="mode"),
         rrb.TimeSeriesView(origin=MAVLINK, name="MAVLink counters"),
-        rrb.TimeSeriesView(origin="plots/learner", name="learner"),
+        *learner,
     )
     z = rrb.TimeSeriesView(
-        origin="plots", contents=["plots/z", "plots/height"], name="z and its setpoint (m)"
+        origin="plots",
+        contents=["plots/z", "plots/height"],
+        name="z and its setpoint (m)",
+        axis_y=rrb.ScalarAxis(range=z_view_m),
     )
     ge = rrb.Vertical(
         rrb.TimeSeriesView(origin="plots/ground_effect/z", name="ground effect z (N)"),

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from autopilot.blueprint import default_blueprint
+from autopilot.blueprint import default_blueprint, z_range_m
 from autopilot.controller import ControlOutput, FlightState, Setpoint
 from autopilot.mission_items import PlanStep
 from autopilot.record_options import FLUSH_WALL_S, RecordOptions
@@ -29,6 +29,7 @@ from autopilot.scene import (
     log_world,
     mission_path,
 )
+from autopilot.series_style import GE_COLORS, counter_style, series_style
 from autopilot.simlink import Step
 from learner.flightlogs.recording import (
     APPLICATION_ID,
@@ -56,8 +57,6 @@ NAN2 = (math.nan,) * 2
 
 # the estimator's error against the simulator's truth, one series each
 ESTIMATOR_ERRORS = ("position_error_m", "velocity_error_m_s", "attitude_error_deg")
-GE_COLORS = {"true": (40, 180, 80), "predicted": (255, 140, 0)}
-ROTOR_COLORS = ((220, 60, 60), (60, 120, 220), (60, 180, 90), (230, 170, 40))
 
 
 def _duration(t_s: np.ndarray) -> rr.TimeColumn:
@@ -81,7 +80,8 @@ class FlightRecorder:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
         # looking at the origin until a mission tells where the landing is
-        rec.save(self.path, default_blueprint=default_blueprint())
+        self._learning = self._info.get("online", "off") != "off"
+        rec.save(self.path, default_blueprint=default_blueprint(learning=self._learning))
         rec.set_log_time_enabled(False)  # sim_time only: the same flight, the same data
         rec.send_recording_name(self.path.stem)
         self._rec = rec
@@ -211,7 +211,8 @@ class FlightRecorder:
         batch = ColumnBatch(TIMELINE)
         batch.add(path, rr.Scalars.columns(scalars=np.zeros((1, len(COUNTERS)))))
         self._counters[link] = (read, batch)
-        self._rec.log(path, rr.SeriesLines(names=list(COUNTERS)), static=True)
+        names, colors = counter_style(link)
+        self._rec.log(path, rr.SeriesLines(names=names, colors=colors), static=True)
 
     def close(self, ended: str) -> None:
         """Flush everything, note how the flight ended, and finish the file (with its footer)."""
@@ -289,14 +290,9 @@ class FlightRecorder:
         rec = self._rec
         log_world(rec, self._boxes, [])
         log_drone(rec, self._vehicle)
-        for path, names in SERIES.items():
-            if "/ground_effect/" in path:
-                color = GE_COLORS[path.rsplit("/", 1)[1]]
-                rec.log(path, rr.SeriesLines(names=list(names), colors=[color]), static=True)
-            elif path.startswith("plots/rotors/"):
-                rec.log(path, rr.SeriesLines(names=list(names), colors=ROTOR_COLORS), static=True)
-            else:
-                rec.log(path, rr.SeriesLines(names=list(names)), static=True)
+        for path in SERIES:
+            names, colors = series_style(path, self._modes)
+            rec.log(path, rr.SeriesLines(names=names, colors=colors), static=True)
         for path, color in ((GE_TRUE_ARROW, "true"), (GE_PREDICTED_ARROW, "predicted")):
             rec.log(path, rr.Arrows3D.from_fields(colors=[GE_COLORS[color]]), static=True)
         self._log_meta()
@@ -328,12 +324,15 @@ class FlightRecorder:
         self._rec.set_time(TIMELINE, duration=np.timedelta64(round(t_s * 1e9), "ns"))
         log_mission(self._rec, points, labels, path)
         if points:
-            self._rec.send_blueprint(default_blueprint(path[-1]), make_active=False)
+            blueprint = default_blueprint(path[-1], z_range_m(path), self._learning)
+            self._rec.send_blueprint(blueprint, make_active=False)
 
     def _mode_changed(self, t_s: float, mode: str) -> None:
         if mode not in self._modes:  # a mode the caller did not announce: name it in the meta
             self._modes.append(mode)
             self._log_meta()
+            names, colors = series_style("plots/mode", self._modes)
+            self._rec.log("plots/mode", rr.SeriesLines(names=names, colors=colors), static=True)
         self._events.append((t_s, "INFO", f"mode {mode}" if self._mode else f"mode {mode} (start)"))
         self._mode = mode
         self._mode_index = float(self._modes.index(mode))

@@ -152,13 +152,29 @@ def mission_path(
     return points, labels, path
 
 
+def merged_points(
+    points: Sequence[Vec3], labels: Sequence[str], within_m: float = 0.01
+) -> tuple[list[Vec3], list[str]]:
+    """Items at one place drawn as one point with one label ("takeoff 0, waypoint 4"): labels
+    drawn on top of each other cannot be read."""
+    out_points: list[Vec3] = []
+    out_labels: list[str] = []
+    for p, label in zip(points, labels, strict=True):
+        for i, q in enumerate(out_points):
+            if max(abs(a - b) for a, b in zip(p, q, strict=True)) <= within_m:
+                out_labels[i] += f", {label}"
+                break
+        else:
+            out_points.append(p)
+            out_labels.append(label)
+    return out_points, out_labels
+
+
 def log_mission(
     rec: rr.RecordingStream, points: Sequence[Vec3], labels: Sequence[str], path: Sequence[Vec3]
 ) -> None:
     """Waypoints with labels and the planned path, at the current time (a new mission
     replaces the old one)."""
-    rec.log(
-        WAYPOINTS,
-        rr.Points3D(list(points), radii=0.01, colors=[COLOR_MISSION], labels=list(labels)),
-    )
+    shown, text = merged_points(points, labels)
+    rec.log(WAYPOINTS, rr.Points3D(shown, radii=0.01, colors=[COLOR_MISSION], labels=text))
     rec.log(MISSION_PATH, rr.LineStrips3D([list(path)], colors=[COLOR_MISSION], radii=0.002))
