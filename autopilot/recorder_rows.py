@@ -47,7 +47,7 @@ SCENE_PERIOD_S = 0.02  # the 3-D scene at 50 Hz (the plots keep every step)
 TRAIL_SPACING_M = 0.01  # a trail point every centimetre flown
 TRAIL_PERIOD_S = 0.25  # the trail is redrawn this often (simulated seconds)
 TRAIL_SEGMENT_S = 10.0  # world/trajectory/0 covers 0-10 s of flight, /1 10-20 s, ...
-TRAIL_RGBA = 0xFFFFFFFF  # white, opaque (rerun packs colours as 0xRRGGBBAA)
+TRAIL_RGBA = 0x17BECFFF  # teal, opaque, against the light ground (rerun packs 0xRRGGBBAA)
 
 # The series logged at every step (the rest: truth, ESC telemetry, learner reports).
 STEP_SERIES = tuple(

@@ -26,10 +26,10 @@ from simbridge.frames import Vec3
 from simbridge.vehicle import Vehicle
 from simbridge.world import Box
 
-GROUND_MARGIN_M = 1.0  # the ground slab reaches this far beyond everything in the scene
+GROUND_MARGIN_M = 0.5  # the ground slab reaches this far beyond everything in the scene
 GROUND_THICKNESS_M = 0.01
 ROTOR_DISC_SEGMENTS = 24
-COLOR_GROUND = (90, 90, 90)
+COLOR_GROUND = (205, 205, 195, 200)  # light and a little translucent: the scene reads over it
 COLOR_OBSTACLE = (150, 110, 70)
 COLOR_BODY = (40, 40, 40)
 COLOR_FRONT_ROTOR = (220, 60, 60)  # so that the heading reads at a glance
