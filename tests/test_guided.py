@@ -15,7 +15,7 @@ from autopilot import guided, requests
 from autopilot.commander import CommanderParams, CommanderState, Phase, command
 from autopilot.mission_items import NAV_WAYPOINT, Geofence, Home, MissionItem, is_home_row, item_at
 from autopilot.modes import FlightMode
-from autopilot.offboard import Refused, follow, local_target
+from autopilot.offboard import Refused, follow, global_target, local_target
 from autopilot.params import ParamStore
 
 REST = 0.0126
@@ -140,3 +140,13 @@ def test_go_to_needs_the_air_and_the_fence_and_flies_in_the_identitys_mode():
     assert not verdict.accepted and "switch to guided" in verdict.reason
     s, verdict = guided.guided_item(item, flying(FlightMode.GUIDED), context("ardupilot"))
     assert verdict.accepted and s.target_m == pytest.approx((0.0, 0.0, 1.0), abs=1e-6)
+
+
+def test_global_setpoints_take_latitude_longitude_and_relative_altitude():
+    lat, lon = round(ORIGIN[0] * 1e7) + 90, round(ORIGIN[1] * 1e7)  # about 1 m north
+    fields = (2.0, 0, 0, 0, 0, 0, 0, NAN, 0)  # 2 m above home, yaw ignored below
+    mask = 0b110111111000  # position only
+    target = global_target(6, mask, lat, lon, fields, ORIGIN, 0.1, (0.0, 0.0, 1.0))
+    assert target.position_m == pytest.approx((0.0, 1.0, 2.1), abs=0.01) and target.position_only
+    with pytest.raises(Refused, match="frame 1"):
+        global_target(1, mask, lat, lon, fields, ORIGIN, 0.1, (0.0, 0.0, 1.0))

@@ -34,6 +34,7 @@ __all__ = ["vehicle"]  # the fixture, used by name
 WORLD = load_world("default").origin
 HOME = Home(WORLD.lat_deg, WORLD.lon_deg, WORLD.alt_m)  # the vehicle starts at the origin
 ACCEPTANCE_M = 0.3
+SPEED_M_S = 1.0  # the mission's own (DO_CHANGE_SPEED), to keep it short: 55 s simulated
 FAST = "20"
 
 
@@ -80,24 +81,26 @@ class Watcher:
 
 
 def write_wpl(path: Path, corners: list[tuple[float, float, float]]) -> int:
-    """Home, take-off to the corners' altitude, the corners, land at home: a `QGC WPL 110`
-    file as MAVProxy's `wp save` writes it. Returns the number of rows."""
+    """Home, take-off to the corners' altitude, a speed, the corners, land at home: a
+    `QGC WPL 110` file as MAVProxy's `wp save` writes it. Returns the number of rows."""
     rows = [(0, 16, 0.0, HOME.lat_deg, HOME.lon_deg, HOME.alt_m)]  # row 0: home, MSL
     rows.append((3, 22, 0.0, 0.0, 0.0, corners[0][2]))
+    rows.append((2, 178, SPEED_M_S, 0.0, 0.0, 0.0))  # DO_CHANGE_SPEED: p2 the speed
     for east, north, up in corners:
         lat, lon = local_to_geodetic(HOME.lat_deg, HOME.lon_deg, east, north)
         rows.append((3, 16, ACCEPTANCE_M, lat, lon, up))
     rows.append((3, 21, 0.0, HOME.lat_deg, HOME.lon_deg, 0.0))
     lines = ["QGC WPL 110"]
     for k, (frame, command, radius, lat, lon, alt) in enumerate(rows):
+        speed = command == 178  # p1 1: ground speed, p2 the speed, p3 -1: throttle unchanged
         fields = (
             k,
             int(k == 0),
             frame,
             command,
-            0,
+            int(speed),
             radius,
-            0,
+            -1 if speed else 0,
             0,
             f"{lat:.8f}",
             f"{lon:.8f}",
@@ -149,7 +152,7 @@ def test_mavproxy_flies_the_8_m_square_at_default_parameters_every_corner(
     approach = closest_approach_m(recording, HOME, HOME, corners)
     assert max(approach) < ACCEPTANCE_M, f"closest to each corner: {approach}"
     print(
-        f"MAVProxy 8 m square {identity}: upload {upload_s:.2f} s, {wall:.1f} s wall, "
+        f"MAVProxy 8 m square {identity}: upload {1e3 * upload_s:.0f} ms, {wall:.1f} s wall, "
         f"{summary['sim_s']:.1f} s simulated, corners within {[round(a, 3) for a in approach]} m"
     )
 
@@ -178,6 +181,10 @@ def test_mavproxy_guided_under_arducopter(vehicle, tmp_path):
         lat, lon = local_to_geodetic(HOME.lat_deg, HOME.lon_deg, 1.5, 0.0)
         mavproxy.send(f"guided {lat:.8f} {lon:.8f} 1")  # DO_REPOSITION
         watcher.wait("at the guided target", lambda: near(1.5, 0.0, 1.0))
+        mavproxy.send("mode LOITER")
+        watcher.wait("LOITER", lambda: mode() == mavutil.mavlink.COPTER_MODE_LOITER)
+        mavproxy.send("mode GUIDED")  # while hovering: the heartbeat says so
+        watcher.wait("GUIDED while hovering", lambda: mode() == guided)
         mavproxy.send("set guided_use_reposition 0")  # the guided MISSION_ITEM, current = 2
         lat, lon = local_to_geodetic(HOME.lat_deg, HOME.lon_deg, 1.5, 1.0)
         mavproxy.send(f"guided {lat:.8f} {lon:.8f} 1.2")
