@@ -303,6 +303,13 @@ def test_sitl_takes_off_flies_offboard_and_a_fence_breach_returns_home():
             if m is not None and m.get_type() == "LOCAL_POSITION_NED":
                 east = m.y
         assert abs(east - 0.6) <= 0.05, east
+        # a setpoint it cannot fly is refused, saying why (a frame it does not know)
+        gs.conn.mav.set_position_target_local_ned_send(
+            0, 1, 1, 12, 0b110111111000, 0, 0, -1, 0, 0, 0, 0, 0, 0, 0, 0
+        )
+        gs.wait_for(
+            "the refusal", lambda m: m.get_type() == "STATUSTEXT" and "frame 12" in m.text, 5.0
+        )
         assert gs.set_param("GF_MAX_HOR_DIST", 0.3) == pytest.approx(0.3)  # now outside
         gs.wait_for(
             "return mode after the breach",
