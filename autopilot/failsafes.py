@@ -82,6 +82,8 @@ def check_failsafes(
         fs.gcs_lost = True
         if flying and settings.gcs_loss_action != ACTION_NONE:
             take(settings.gcs_loss_action, "ground station lost")
+        else:  # said all the same, as PX4 does with NAV_DLL_ACT 0
+            texts.append("ground station lost (no failsafe action: NAV_DLL_ACT 0 or on the ground)")
     if position_lost is not None and not fs.position_lost:
         fs.position_lost = True  # PX4: position loss in flight lands (COM_POSCTL_NAVL)
         if flying:
