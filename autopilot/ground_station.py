@@ -30,6 +30,7 @@ UNSUPPORTED, FAILED = mav.MAV_RESULT_UNSUPPORTED, mav.MAV_RESULT_FAILED
 FORCE_MAGIC = 21196  # ARM_DISARM param2: arm or disarm whatever the checks say
 SIGNING_SAVE_S = 10.0  # wall seconds between saves of the signing timestamp
 REFUSAL_REPEAT_S = 5.0  # wall seconds before the same refused setpoint is explained again
+MAX_REFUSALS = 64
 
 
 @dataclass
@@ -234,6 +235,8 @@ class GroundStation:
             if refused is not None:
                 self.link.counters.invalid += 1
                 if inp.wall_s - self.refusals.get(refused, -math.inf) > REFUSAL_REPEAT_S:
+                    if len(self.refusals) > MAX_REFUSALS:  # hostile input: bounded all the same
+                        self.refusals.clear()
                     self.refusals[refused] = inp.wall_s  # a stream's refusal, said once
                     self._text(inp, refused, mav.MAV_SEVERITY_WARNING)
             return cmd
