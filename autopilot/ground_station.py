@@ -218,7 +218,8 @@ class GroundStation:
             return self._command(m, cmd, inp)
         if kind == "SET_MODE":
             mode = decode_mode(self.identity, int(m.custom_mode))
-            return self._mode(cmd, mode, inp, 11, (m.get_srcSystem(), m.get_srcComponent()))
+            peer = (m.get_srcSystem(), m.get_srcComponent())
+            return self._mode(cmd, mode, inp, 11, peer, f"custom mode {int(m.custom_mode)}")
         if kind.startswith("PARAM_"):
             return self._param(m, cmd, inp)
         if kind in ("MISSION_ITEM", "MISSION_ITEM_INT") and m.current == 2:
@@ -313,7 +314,9 @@ class GroundStation:
             else:
                 sub = int(p[2]) if self.identity == "px4" and math.isfinite(p[2]) else 0
                 mode = decode_mode(self.identity, int(p[1]), sub)
-                return self._mode(cmd, mode, inp, c, (m.get_srcSystem(), m.get_srcComponent()))
+                asked = f"main mode {int(p[1])} sub {sub}" if self.identity == "px4" else ""
+                peer = (m.get_srcSystem(), m.get_srcComponent())
+                return self._mode(cmd, mode, inp, c, peer, asked or f"custom mode {int(p[1])}")
         elif c == mav.MAV_CMD_MISSION_START:
             if math.isfinite(p[0]) and p[0] > 0 and cmd.plan:
                 cmd, verdict = self._set_current(cmd, int(p[0]))
@@ -365,9 +368,10 @@ class GroundStation:
         inp: StepInput,
         command: int,
         peer: tuple[int, int],
+        asked: str,
     ) -> CommanderState:
         if mode is None:
-            verdict = requests.Verdict(DENIED, "set mode: this vehicle has no such mode")
+            verdict = requests.Verdict(DENIED, f"set mode: this vehicle has no {asked}")
         else:
             params = self.params.commander()
             position = inp.state.position_m

@@ -39,7 +39,8 @@ ARDUCOPTER_MODES = {
 }
 # ArduCopter has no take-off or offboard mode: both are flown in Guided. PX4 flies a
 # reposition (go-to) in AUTO.LOITER.
-ARDUCOPTER_ALIASES = {16: FlightMode.HOLD, 2: FlightMode.HOLD}  # PosHold, AltHold
+# PosHold, AltHold, Brake (MAVSDK 4.1's "hold" under ArduCopter): held in Loiter
+ARDUCOPTER_ALIASES = {16: FlightMode.HOLD, 2: FlightMode.HOLD, 17: FlightMode.HOLD}
 
 IDENTITIES = {"px4": mav.MAV_AUTOPILOT_PX4, "ardupilot": mav.MAV_AUTOPILOT_ARDUPILOTMEGA}
 

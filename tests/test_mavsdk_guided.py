@@ -1,11 +1,12 @@
 """What a new MAVSDK user does in the first hour (issue 18), with MAVSDK 4.1 over loopback
 UDP against `groundfx autopilot` at its default parameters: an 8 m square through the mission
 plugin under both identities, every corner checked on the recording the autopilot wrote;
-goto_location and offboard velocity under PX4."""
+goto_location and offboard velocity under both (under ArduCopter both are flown in Guided)."""
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import math
 import time
 from typing import Any
@@ -131,7 +132,12 @@ def test_mavsdk_flies_the_8_m_square_at_default_parameters_every_corner(
     )
 
 
-async def goto_and_offboard(client: Client) -> dict[str, Any]:
+# MAVSDK's name for the mode a go-to is flown in: PX4's AUTO.LOITER; ArduCopter's Guided,
+# which MAVSDK calls offboard
+GOTO_MODE = {"px4": FlightMode.HOLD, "ardupilot": FlightMode.OFFBOARD}
+
+
+async def goto_and_offboard(client: Client, identity: str) -> dict[str, Any]:
     """Take off, goto_location 2 m east, then offboard at 0.5 m/s north started with velocity
     setpoints, stop, land."""
     telemetry, action = client.telemetry, client.action
@@ -153,7 +159,7 @@ async def goto_and_offboard(client: Client) -> dict[str, Any]:
     )
     goto_s = time.monotonic() - t0
     mode = await within("flight mode", 5, telemetry.flight_mode())
-    assert mode == FlightMode.HOLD  # PX4 flies a reposition in AUTO.LOITER
+    assert mode == GOTO_MODE[identity]
     offboard = client.offboard
     # started with a velocity setpoint, as MAVSDK's offboard_velocity_ned example does
     north = VelocityNedYaw(0.5, 0.0, 0.0, 0.0)
@@ -182,13 +188,15 @@ async def goto_and_offboard(client: Client) -> dict[str, Any]:
     return {"goto_ack_s": goto_ack_s, "goto_s": goto_s}
 
 
-def test_mavsdk_goto_location_and_offboard_velocity_under_px4(vehicle):
+@pytest.mark.parametrize("identity", IDENTITIES)
+def test_mavsdk_goto_location_and_offboard_velocity(vehicle, identity):
     port = free_udp_port()
     # four times real time: MAVSDK streams setpoints at 20 Hz of the wall clock, 0.2 s
     # simulated apart, well inside PX4's COM_OF_LOSS_T (1 s)
-    flight = vehicle("px4", f"udpin:127.0.0.1:{port}", speedup="4")
-    result = asyncio.run(with_mavsdk(port, "px4", goto_and_offboard, acceptance_m=None))
+    flight = vehicle(identity, f"udpin:127.0.0.1:{port}", speedup="4")
+    fly = functools.partial(goto_and_offboard, identity=identity)
+    result = asyncio.run(with_mavsdk(port, identity, fly, acceptance_m=None))
     summary = flight.summary()
     assert summary["landed"], summary
     acked, there = result["goto_ack_s"], result["goto_s"]
-    print(f"MAVSDK goto: acked in {1e3 * acked:.0f} ms, there in {there:.1f} s wall")
+    print(f"MAVSDK goto {identity}: acked in {1e3 * acked:.0f} ms, there in {there:.1f} s wall")
