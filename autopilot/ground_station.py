@@ -31,6 +31,7 @@ FORCE_MAGIC = 21196  # ARM_DISARM param2: arm or disarm whatever the checks say
 SIGNING_SAVE_S = 10.0  # wall seconds between saves of the signing timestamp
 REFUSAL_REPEAT_S = 5.0  # wall seconds before the same refused setpoint is explained again
 MAX_REFUSALS = 64
+GUIDED_ITEM = 2  # MISSION_ITEM.current 2: ArduPilot's guided target, not a mission item
 
 
 @dataclass
@@ -222,7 +223,7 @@ class GroundStation:
             return self._mode(cmd, mode, inp, 11, peer, f"custom mode {int(m.custom_mode)}")
         if kind.startswith("PARAM_"):
             return self._param(m, cmd, inp)
-        if kind in ("MISSION_ITEM", "MISSION_ITEM_INT") and m.current == 2:
+        if kind in ("MISSION_ITEM", "MISSION_ITEM_INT") and m.current == GUIDED_ITEM:
             return self._guided_item(m, cmd, inp)
         if kind.startswith("MISSION_") and kind != "MISSION_SET_CURRENT":
             return self._mission(m, cmd, inp)

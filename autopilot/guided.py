@@ -25,6 +25,15 @@ from simbridge.hil import mavlink as mav
 DENIED = mav.MAV_RESULT_DENIED
 # ArduCopter's Guided, whatever it is doing in it (heartbeat custom mode 4 for all three)
 GUIDED_MODES = (FlightMode.GUIDED, FlightMode.TAKEOFF, FlightMode.OFFBOARD)
+GO_TO_FRAMES = (
+    mav.MAV_FRAME_GLOBAL,
+    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    mav.MAV_FRAME_GLOBAL_INT,
+    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+    mav.MAV_FRAME_GLOBAL_TERRAIN_ALT,
+    mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
+)
+UNSET = 2**31 - 1  # INT32_MAX: COMMAND_INT's x or y not given
 
 
 @dataclass(frozen=True)
@@ -72,11 +81,11 @@ def reposition(
     it), ignored under ArduCopter, as ArduCopter does."""
     if m.get_type() == "COMMAND_INT":
         frame, lat, lon, alt = int(m.frame), m.x * 1e-7, m.y * 1e-7, float(m.z)
-        if m.x == 0 and m.y == 0:
+        if (m.x, m.y) == (0, 0) or UNSET in (m.x, m.y):
             lat = lon = math.nan  # no position: here
     else:
         frame, lat, lon, alt = mav.MAV_FRAME_GLOBAL, m.param5, m.param6, m.param7
-    if frame not in (0, 3, 5, 6, 10, 11):
+    if frame not in GO_TO_FRAMES:
         return cmd, requests.Verdict(DENIED, f"go-to denied: frame {frame} is not global")
     try:
         target = global_position(frame, lat, lon, alt, ctx.origin, ctx.home_up_m, ctx.position_m)

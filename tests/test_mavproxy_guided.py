@@ -15,8 +15,9 @@ from typing import Any
 
 import pytest
 from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from autopilot.mission_items import Home
+from autopilot.mission_items import DO_CHANGE_SPEED, NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT, Home
 from simbridge.frames import geodetic_to_local, local_to_geodetic
 from simbridge.world import load_world
 from tests.client_vehicle import (
@@ -83,16 +84,23 @@ class Watcher:
 def write_wpl(path: Path, corners: list[tuple[float, float, float]]) -> int:
     """Home, take-off to the corners' altitude, a speed, the corners, land at home: a
     `QGC WPL 110` file as MAVProxy's `wp save` writes it. Returns the number of rows."""
-    rows = [(0, 16, 0.0, HOME.lat_deg, HOME.lon_deg, HOME.alt_m)]  # row 0: home, MSL
-    rows.append((3, 22, 0.0, 0.0, 0.0, corners[0][2]))
-    rows.append((2, 178, SPEED_M_S, 0.0, 0.0, 0.0))  # DO_CHANGE_SPEED: p2 the speed
+    relative, msl, mission = (
+        mav.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+        mav.MAV_FRAME_GLOBAL,
+        mav.MAV_FRAME_MISSION,
+    )
+    rows = [(msl, NAV_WAYPOINT, 0.0, HOME.lat_deg, HOME.lon_deg, HOME.alt_m)]  # row 0: home
+    rows.append((relative, NAV_TAKEOFF, 0.0, 0.0, 0.0, corners[0][2]))
+    rows.append((mission, DO_CHANGE_SPEED, SPEED_M_S, 0.0, 0.0, 0.0))  # p2: the speed
     for east, north, up in corners:
         lat, lon = local_to_geodetic(HOME.lat_deg, HOME.lon_deg, east, north)
-        rows.append((3, 16, ACCEPTANCE_M, lat, lon, up))
-    rows.append((3, 21, 0.0, HOME.lat_deg, HOME.lon_deg, 0.0))
+        rows.append((relative, NAV_WAYPOINT, ACCEPTANCE_M, lat, lon, up))
+    rows.append((relative, NAV_LAND, 0.0, HOME.lat_deg, HOME.lon_deg, 0.0))
     lines = ["QGC WPL 110"]
     for k, (frame, command, radius, lat, lon, alt) in enumerate(rows):
-        speed = command == 178  # p1 1: ground speed, p2 the speed, p3 -1: throttle unchanged
+        speed = (
+            command == DO_CHANGE_SPEED
+        )  # p1 1: ground speed, p2 the speed, p3 -1: throttle unchanged
         fields = (
             k,
             int(k == 0),
