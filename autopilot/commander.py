@@ -1,7 +1,7 @@
 """The commander: flight modes, arming, missions, take-off, landing, as pure functions.
 
 Two things describe the vehicle. The flight mode is what a ground station chose (hold,
-mission, takeoff, land, return, offboard; `autopilot.modes`). The phase is what the vehicle
+mission, takeoff, land, return, offboard, guided; `autopilot.modes`). The phase is what the vehicle
 is doing: DISARMED -> ARMED (idling on the ground) -> TAKING_OFF -> FLYING / HOLDING ->
 LANDING -> LANDED (touchdown held for `touchdown_s`: rotors off, disarmed). Requests from a
 ground station (`requests.py`) change the state; `command` steps it once per control step.
@@ -20,6 +20,7 @@ from enum import StrEnum
 from autopilot.controller import Setpoint
 from autopilot.mission_items import PlanStep
 from autopilot.modes import FlightMode
+from autopilot.offboard import Target, Track, follow
 from simbridge.config import param
 from simbridge.frames import Vec3
 
@@ -97,8 +98,10 @@ class CommanderState:
     down_since_s: float | None = None
     touchdown_s: float | None = None
     takeoff_altitude_m: float | None = None  # a take-off command's own altitude
-    offboard: Setpoint | None = None
+    offboard: Target | None = None
     offboard_s: float = -math.inf  # when the last offboard setpoint came
+    offboard_track: Track | None = None  # where the offboard setpoint has got to
+    hold_mode: FlightMode = FlightMode.HOLD  # after a take-off, or offboard setpoints stop
 
 
 @dataclass(frozen=True)
@@ -333,15 +336,25 @@ def command(
             ) else Phase.TAKING_OFF  # fmt: skip
             if phase != state.phase:
                 state = phase_to(state, phase, time_s)
-            return Command(
-                dataclasses.replace(state, carrot_m=state.offboard.position_m),
+            setpoint, track = follow(
                 state.offboard,
-                True,
-                events=tuple(events),
+                state.offboard_track,
+                position_m,
+                math.radians(state.yaw_deg),
+                time_s,
             )
-        state = dataclasses.replace(state, mode=FlightMode.HOLD, target_m=position_m, carrot_m=None)
+            state = dataclasses.replace(
+                state,
+                carrot_m=setpoint.position_m,
+                offboard_track=track,
+                yaw_deg=math.degrees(setpoint.yaw_rad),
+            )
+            return Command(state, setpoint, True, events=tuple(events))
+        state = dataclasses.replace(
+            state, mode=state.hold_mode, target_m=position_m, carrot_m=None, offboard_track=None
+        )
         state = go_to(state, position_m, position_m)
-        events.append("offboard setpoints stopped: holding")
+        events.append(f"offboard setpoints stopped: holding in {state.hold_mode}")
     if state.mode == FlightMode.MISSION and not _climb_first(state):
         state, flown = _fly_mission(state, params, time_s, position_m)
         reached += flown
@@ -373,7 +386,7 @@ def command(
                 start_landing(state, time_s, position_m, state.target_m),
                 params, time_s, position_m, height_m, resting_height_m, events, ground_contact,
             )  # fmt: skip
-    elif state.target_m is None:  # HOLD or TAKEOFF without a target: hold here
+    elif state.target_m is None:  # HOLD, GUIDED or TAKEOFF without a target: hold here
         state = go_to(state, position_m, position_m)
     horizontal = state.speed_m_s or params.cruise_speed_m_s
     carrot = limited_setpoint(
@@ -391,8 +404,8 @@ def command(
             state = dataclasses.replace(state, target_m=None, reached_s=None)  # on to item 1
     if state.mode == FlightMode.TAKEOFF and state.reached_s is not None:
         # also a take-off mode chosen in the air: it climbs to the altitude, then holds
-        state = dataclasses.replace(state, mode=FlightMode.HOLD)
-        events.append("take-off complete: holding")
+        state = dataclasses.replace(state, mode=state.hold_mode)
+        events.append(f"take-off complete: holding in {state.hold_mode}")
     if state.phase in (Phase.FLYING, Phase.HOLDING):
         holding = state.reached_s is not None
         phase = Phase.HOLDING if holding else Phase.FLYING

@@ -12,41 +12,26 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from autopilot import requests, telemetry
+from autopilot import guided, requests, telemetry
 from autopilot.commander import AIRBORNE_PHASES, CommanderState, Phase
-from autopilot.controller import FlightState, Setpoint
+from autopilot.controller import FlightState
+from autopilot.failsafes import Failsafes, check_failsafes
 from autopilot.gcs_link import GcsLink
-from autopilot.mission_items import Geofence, Home, MissionItem, plan_steps
+from autopilot.mission_items import Geofence, Home, MissionItem, is_home_row, plan_steps
 from autopilot.mission_protocol import MissionProtocol, Outcome
 from autopilot.modes import FlightMode, decode_mode
 from autopilot.param_protocol import ftp_nak, handle_param
-from autopilot.params import (
-    ACTION_HOLD,
-    ACTION_LAND,
-    ACTION_NAMES,
-    ACTION_RETURN,
-    ACTION_WARN,
-    ParamStore,
-)
-from simbridge.frames import local_to_geodetic, ned_to_enu
+from autopilot.params import ParamStore
+from simbridge.frames import euler_from_quat, local_to_geodetic
 from simbridge.hil import mavlink as mav
 
 ACCEPTED, DENIED = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_DENIED
 UNSUPPORTED, FAILED = mav.MAV_RESULT_UNSUPPORTED, mav.MAV_RESULT_FAILED
 FORCE_MAGIC = 21196  # ARM_DISARM param2: arm or disarm whatever the checks say
 SIGNING_SAVE_S = 10.0  # wall seconds between saves of the signing timestamp
-# SET_POSITION_TARGET_LOCAL_NED.type_mask bits: position ignored, velocity ignored
-IGNORE_POSITION = 0b111
-IGNORE_VELOCITY = 0b111000
-
-
-@dataclass
-class Failsafes:
-    gcs_seen: bool = False  # a ground station has sent a heartbeat
-    gcs_heard_wall_s: float = 0.0
-    gcs_lost: bool = False
-    fence_breached: bool = False
-    position_lost: bool = False
+REFUSAL_REPEAT_S = 5.0  # wall seconds before the same refused setpoint is explained again
+MAX_REFUSALS = 64
+GUIDED_ITEM = 2  # MISSION_ITEM.current 2: ArduPilot's guided target, not a mission item
 
 
 @dataclass
@@ -75,6 +60,7 @@ class GroundStation:
     surface_z: float | None = None  # local z of the surface under the vehicle on the ground
     last_status: tuple[Any, ...] | None = None
     text_id: int = 0
+    refusals: dict[str, float] = field(default_factory=dict)  # setpoint refusal -> wall time
 
     def __post_init__(self) -> None:
         self.protocol = MissionProtocol(self.identity)
@@ -85,6 +71,9 @@ class GroundStation:
         """Apply what the ground stations asked since the last step; check the failsafes."""
         if self.initial_home_m is None:
             self.initial_home_m = inp.state.position_m
+        hold_mode = FlightMode.GUIDED if self.identity == "ardupilot" else FlightMode.HOLD
+        if cmd.hold_mode != hold_mode:  # ArduCopter holds in Guided after a guided take-off
+            cmd = requests.dataclasses.replace(cmd, hold_mode=hold_mode)
         if cmd.phase not in AIRBORNE_PHASES:
             self.surface_z = inp.state.position_m[2] - inp.height_m
         for m in self.link.poll(inp.wall_s):
@@ -230,9 +219,12 @@ class GroundStation:
             return self._command(m, cmd, inp)
         if kind == "SET_MODE":
             mode = decode_mode(self.identity, int(m.custom_mode))
-            return self._mode(cmd, mode, inp, 11, (m.get_srcSystem(), m.get_srcComponent()))
+            peer = (m.get_srcSystem(), m.get_srcComponent())
+            return self._mode(cmd, mode, inp, 11, peer, f"custom mode {int(m.custom_mode)}")
         if kind.startswith("PARAM_"):
             return self._param(m, cmd, inp)
+        if kind in ("MISSION_ITEM", "MISSION_ITEM_INT") and m.current == GUIDED_ITEM:
+            return self._guided_item(m, cmd, inp)
         if kind.startswith("MISSION_") and kind != "MISSION_SET_CURRENT":
             return self._mission(m, cmd, inp)
         if kind == "MISSION_SET_CURRENT":
@@ -240,8 +232,16 @@ class GroundStation:
             if not verdict.accepted:
                 self._text(inp, verdict.reason, mav.MAV_SEVERITY_WARNING)
             return cmd
-        if kind == "SET_POSITION_TARGET_LOCAL_NED":
-            return self._offboard(m, cmd, inp)
+        if kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"):
+            cmd, refused = guided.setpoint(m, cmd, self._context(cmd, inp))
+            if refused is not None:
+                self.link.counters.invalid += 1
+                if inp.wall_s - self.refusals.get(refused, -math.inf) > REFUSAL_REPEAT_S:
+                    if len(self.refusals) > MAX_REFUSALS:  # hostile input: bounded all the same
+                        self.refusals.clear()
+                    self.refusals[refused] = inp.wall_s  # a stream's refusal, said once
+                    self._text(inp, refused, mav.MAV_SEVERITY_WARNING)
+            return cmd
         if kind == "REQUEST_DATA_STREAM":
             ids = telemetry.DATA_STREAMS.keys() if m.req_stream_id == 0 else [m.req_stream_id]
             for stream_id in ids:
@@ -299,8 +299,12 @@ class GroundStation:
                 z = m.param7 if m.get_type() == "COMMAND_LONG" else m.z
                 if self.identity == "ardupilot" and math.isfinite(z) and z > 0.0:
                     altitude = float(z)
-                cmd = requests.dataclasses.replace(cmd, takeoff_altitude_m=altitude)
-                cmd, verdict = requests.set_mode(cmd, FlightMode.TAKEOFF, t, position, params)
+                if self.identity == "ardupilot" and altitude is None:
+                    # ArduCopter takes off to the command's altitude, above where it stands
+                    verdict = requests.Verdict(DENIED, "take-off denied: param 7 altitude <= 0")
+                else:
+                    cmd = requests.dataclasses.replace(cmd, takeoff_altitude_m=altitude)
+                    cmd, verdict = requests.set_mode(cmd, FlightMode.TAKEOFF, t, position, params)
         elif c == mav.MAV_CMD_NAV_LAND:
             cmd, verdict = requests.set_mode(cmd, FlightMode.LAND, t, position, params)
         elif c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
@@ -311,7 +315,9 @@ class GroundStation:
             else:
                 sub = int(p[2]) if self.identity == "px4" and math.isfinite(p[2]) else 0
                 mode = decode_mode(self.identity, int(p[1]), sub)
-                return self._mode(cmd, mode, inp, c, (m.get_srcSystem(), m.get_srcComponent()))
+                asked = f"main mode {int(p[1])} sub {sub}" if self.identity == "px4" else ""
+                peer = (m.get_srcSystem(), m.get_srcComponent())
+                return self._mode(cmd, mode, inp, c, peer, asked or f"custom mode {int(p[1])}")
         elif c == mav.MAV_CMD_MISSION_START:
             if math.isfinite(p[0]) and p[0] > 0 and cmd.plan:
                 cmd, verdict = self._set_current(cmd, int(p[0]))
@@ -319,6 +325,8 @@ class GroundStation:
                 if cmd.mode == FlightMode.MISSION and cmd.mission_done:
                     cmd = requests.dataclasses.replace(cmd, mode=FlightMode.HOLD)
                 cmd, verdict = requests.set_mode(cmd, FlightMode.MISSION, t, position, params)
+        elif c == mav.MAV_CMD_DO_REPOSITION:
+            cmd, verdict = guided.reposition(m, cmd, self._context(cmd, inp))
         elif c == mav.MAV_CMD_DO_CHANGE_SPEED:
             cmd, verdict = requests.change_speed(cmd, float(p[1]))
         elif c == mav.MAV_CMD_DO_SET_MISSION_CURRENT:
@@ -361,21 +369,14 @@ class GroundStation:
         inp: StepInput,
         command: int,
         peer: tuple[int, int],
+        asked: str,
     ) -> CommanderState:
         if mode is None:
-            verdict = requests.Verdict(DENIED, "set mode: this vehicle has no such mode")
+            verdict = requests.Verdict(DENIED, f"set mode: this vehicle has no {asked}")
         else:
             params = self.params.commander()
             position = inp.state.position_m
             before = cmd.mode
-            if (
-                mode == FlightMode.OFFBOARD
-                and self.identity == "ardupilot"
-                and inp.time_s - cmd.offboard_s > params.offboard_timeout_s
-            ):
-                # ArduCopter's Guided without a target holds; MAVSDK asks for it before a
-                # take-off, which is itself flown in Guided.
-                mode = FlightMode.TAKEOFF if cmd.mode == FlightMode.TAKEOFF else FlightMode.HOLD
             cmd, verdict = requests.set_mode(cmd, mode, inp.time_s, position, params)
             if verdict.accepted and cmd.mode != before:
                 self.on_event(inp.time_s, f"mode {cmd.mode}")
@@ -392,25 +393,30 @@ class GroundStation:
                 return requests.set_current(cmd, index)
         return cmd, requests.Verdict(DENIED, f"no mission item {seq}")
 
-    def _offboard(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
-        if m.coordinate_frame != mav.MAV_FRAME_LOCAL_NED:
-            self.link.counters.invalid += 1
-            return cmd
-        if m.type_mask & IGNORE_POSITION:
-            self.link.counters.invalid += 1  # velocity-only targets: not supported
-            return cmd
-        values = (m.x, m.y, m.z)
-        if not all(math.isfinite(v) and abs(v) < 1e4 for v in values):
-            self.link.counters.invalid += 1
-            return cmd
-        velocity = (0.0, 0.0, 0.0)
-        if not m.type_mask & IGNORE_VELOCITY and all(
-            math.isfinite(v) and abs(v) < 100 for v in (m.vx, m.vy, m.vz)
-        ):
-            velocity = ned_to_enu((m.vx, m.vy, m.vz))
-        yaw = math.pi / 2 - m.yaw if math.isfinite(m.yaw) else 0.0  # NED heading -> ENU
-        setpoint = Setpoint(ned_to_enu(values), velocity_m_s=velocity, yaw_rad=yaw)
-        return requests.offboard_setpoint(cmd, setpoint, inp.time_s)
+    def _context(self, cmd: CommanderState, inp: StepInput) -> guided.Context:
+        home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
+        return guided.Context(
+            identity=self.identity,
+            origin=self.origin,
+            home_m=home,
+            home_up_m=self.ground_z(home),
+            position_m=inp.state.position_m,
+            heading_rad=euler_from_quat(inp.state.quaternion)[2],
+            fence=self.params.geofence(),
+            time_s=inp.time_s,
+        )
+
+    def _guided_item(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        """ArduPilot's guided item (MISSION_ITEM with current = 2), answered by MISSION_ACK."""
+        cmd, verdict = guided.guided_item(m, cmd, self._context(cmd, inp))
+        if verdict.reason:
+            self._text(inp, verdict.reason, mav.MAV_SEVERITY_WARNING)
+        result = mav.MAV_MISSION_ACCEPTED if verdict.accepted else mav.MAV_MISSION_ERROR
+        peer = (m.get_srcSystem(), m.get_srcComponent())
+        self.send(self.protocol.ack(peer, result), inp)
+        if verdict.accepted:
+            self.on_event(inp.time_s, "guided target")
+        return cmd
 
     def _param(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
         outcome = handle_param(self.params, m)
@@ -455,46 +461,19 @@ class GroundStation:
         home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
         origin = Home(*self.origin)
         steps = plan_steps(items, origin, self.ground_z(home))
-        if self.identity == "ardupilot" and steps:
+        if self.identity == "ardupilot" and steps and is_home_row(items[0], self.home(cmd)):
             steps = steps[1:]  # ArduPilot's item 0 is home, not a place to fly to
         return steps
 
     # --- failsafes -------------------------------------------------------------------------
 
     def _failsafes(self, cmd: CommanderState, inp: StepInput) -> CommanderState:
-        fs = self.failsafes
-        settings = self.params.failsafe()
-        flying = cmd.phase in AIRBORNE_PHASES
-        lost = fs.gcs_seen and inp.wall_s - fs.gcs_heard_wall_s > settings.gcs_loss_timeout_s
-        if lost and not fs.gcs_lost:
-            fs.gcs_lost = True
-            if flying:
-                cmd = self._act(cmd, settings.gcs_loss_action, "ground station lost", inp)
-        if inp.position_lost is not None and not fs.position_lost:
-            fs.position_lost = True  # PX4: position loss in flight lands (COM_POSCTL_NAVL)
-            if flying:
-                cmd = self._act(cmd, ACTION_LAND, f"{inp.position_lost} in flight", inp)
-        elif inp.position_lost is None:
-            fs.position_lost = False
         home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
-        p = inp.state.position_m
-        fence = self.params.geofence()
-        breach = fence.breach(p[0] - home[0], p[1] - home[1], p[2] - home[2]) if flying else None
-        if breach is not None and not fs.fence_breached:
-            fs.fence_breached = True
-            cmd = self._act(cmd, settings.fence_action, f"geofence: {breach}", inp)
-        elif breach is None:
-            fs.fence_breached = False
-        return cmd
-
-    def _act(self, cmd: CommanderState, action: int, why: str, inp: StepInput) -> CommanderState:
-        mode = {ACTION_HOLD: FlightMode.HOLD, ACTION_RETURN: FlightMode.RETURN,
-                ACTION_LAND: FlightMode.LAND}.get(action)  # fmt: skip
-        self._text(
-            inp, f"failsafe: {why}: {ACTION_NAMES.get(action, action)}", mav.MAV_SEVERITY_CRITICAL
-        )
-        if mode is None or action == ACTION_WARN or cmd.mode == mode:
-            return cmd
-        position = inp.state.position_m
-        cmd, _ = requests.set_mode(cmd, mode, inp.time_s, position, self.params.commander())
+        cmd, texts = check_failsafes(
+            self.failsafes, cmd, self.params.failsafe(), self.params.geofence(),
+            self.params.commander(), inp.time_s, inp.wall_s, inp.state.position_m, home,
+            inp.position_lost,
+        )  # fmt: skip
+        for text in texts:
+            self._text(inp, text, mav.MAV_SEVERITY_CRITICAL)
         return cmd

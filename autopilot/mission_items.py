@@ -204,6 +204,25 @@ def validate_item(seq: int, item: MissionItem, home: Home, fence: Geofence) -> N
         raise MissionError(seq, item, field, f"outside the geofence: {why}", result)
 
 
+HOME_ROW_M = 1.0  # an item 0 this close to home (horizontally) is a home row
+
+
+def is_home_row(item: MissionItem, home: Home) -> bool:
+    """Whether item 0 of a mission is the home row ArduPilot keeps there, not a place to fly.
+
+    Ground stations that know ArduPilot put home there: Mission Planner, QGroundControl,
+    MAVProxy's WPL files (row 0), MAVSDK's mission_raw import (the plan's planned home); all
+    as a waypoint in an MSL frame, or at home, or at 0, 0. MAVSDK's mission plugin does not:
+    it sends its first waypoint as item 0, in the relative-altitude frame, and ArduCopter
+    would overwrite it with home and never fly it. Here it is flown."""
+    if item.command != NAV_WAYPOINT:
+        return False
+    if item.frame in MSL_FRAMES or (item.x, item.y) == (0, 0):
+        return True
+    east, north, _ = local_offset(item, home)
+    return math.hypot(east, north) <= HOME_ROW_M
+
+
 def validate_mission(items: tuple[MissionItem, ...], home: Home, fence: Geofence) -> None:
     for seq, item in enumerate(items):
         validate_item(seq, item, home, fence)

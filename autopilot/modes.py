@@ -19,6 +19,7 @@ class FlightMode(StrEnum):
     LAND = "land"
     RETURN = "return"
     OFFBOARD = "offboard"
+    GUIDED = "guided"  # go to a target, then hold there (ArduCopter's Guided; PX4's reposition)
 
 
 PX4_MAIN_AUTO, PX4_MAIN_POSCTL, PX4_MAIN_OFFBOARD = 4, 3, 6
@@ -31,13 +32,15 @@ PX4_SUB = {
 }
 ARDUCOPTER_MODES = {
     FlightMode.MISSION: 3,  # Auto
-    FlightMode.OFFBOARD: 4,  # Guided
+    FlightMode.GUIDED: 4,
     FlightMode.HOLD: 5,  # Loiter
     FlightMode.RETURN: 6,  # RTL
     FlightMode.LAND: 9,
 }
-# ArduCopter has no take-off mode: a take-off is flown in Guided.
-ARDUCOPTER_ALIASES = {16: FlightMode.HOLD, 2: FlightMode.HOLD}  # PosHold, AltHold
+# ArduCopter has no take-off or offboard mode: both are flown in Guided. PX4 flies a
+# reposition (go-to) in AUTO.LOITER.
+# PosHold, AltHold, Brake (MAVSDK 4.1's "hold" under ArduCopter): held in Loiter
+ARDUCOPTER_ALIASES = {16: FlightMode.HOLD, 2: FlightMode.HOLD, 17: FlightMode.HOLD}
 
 IDENTITIES = {"px4": mav.MAV_AUTOPILOT_PX4, "ardupilot": mav.MAV_AUTOPILOT_ARDUPILOTMEGA}
 
@@ -45,7 +48,9 @@ IDENTITIES = {"px4": mav.MAV_AUTOPILOT_PX4, "ardupilot": mav.MAV_AUTOPILOT_ARDUP
 def custom_mode(mode: FlightMode, identity: str) -> int:
     """HEARTBEAT.custom_mode for `mode` under `identity` ("px4" or "ardupilot")."""
     if identity == "ardupilot":
-        return ARDUCOPTER_MODES.get(mode, ARDUCOPTER_MODES[FlightMode.OFFBOARD])
+        return ARDUCOPTER_MODES.get(mode, ARDUCOPTER_MODES[FlightMode.GUIDED])
+    if mode == FlightMode.GUIDED:
+        mode = FlightMode.HOLD
     if mode == FlightMode.OFFBOARD:
         return PX4_MAIN_OFFBOARD << 16
     return PX4_MAIN_AUTO << 16 | PX4_SUB[mode] << 24

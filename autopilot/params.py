@@ -22,6 +22,7 @@ import yaml
 from autopilot.commander import CommanderParams
 from autopilot.controller import ControllerParams
 from autopilot.estimator_params import EstimatorParams
+from autopilot.firmware_defaults import identity_defaults
 from autopilot.land_detector import LandDetectorParams
 from autopilot.mission_items import Geofence
 from simbridge.config import ConfigError, param
@@ -35,7 +36,7 @@ MODEL_NAMES = ("none", "analytic", "neural")
 @dataclass(frozen=True)
 class FailsafeParams:
     gcs_loss_action: int = param(
-        ACTION_LAND,
+        ACTION_NONE,
         lo=0,
         hi=5,
         doc="ground station lost in flight: 0 none, 2 hold, 3 return, 5 land",
@@ -50,8 +51,8 @@ class FailsafeParams:
 
 @dataclass(frozen=True)
 class FenceParams:
-    max_altitude_m: float = param(10.0, unit="m", lo=0.0, hi=1000.0, doc="above home (0: off)")
-    max_radius_m: float = param(10.0, unit="m", lo=0.0, hi=10000.0, doc="from home (0: off)")
+    max_altitude_m: float = param(0.0, unit="m", lo=0.0, hi=1000.0, doc="above home (0: off)")
+    max_radius_m: float = param(0.0, unit="m", lo=0.0, hi=10000.0, doc="from home (0: off)")
 
 
 @dataclass(frozen=True)
@@ -219,11 +220,18 @@ def check_value(name: str, value: float) -> str | None:
 
 
 class ParamStore:
-    """Current values; `path` (YAML, name: value) keeps the ones set across restarts."""
+    """Current values; `path` (YAML, name: value) keeps the ones set across restarts. The
+    defaults follow the firmware `identity` claims to be (autopilot/firmware_defaults.py)."""
 
-    def __init__(self, path: Path | None, overrides: dict[str, float] | None = None) -> None:
+    def __init__(
+        self,
+        path: Path | None,
+        overrides: dict[str, float] | None = None,
+        identity: str = "px4",
+    ) -> None:
         self.path = path
         self.values = {name: float32(spec.default) for name, spec in SPECS.items()}
+        self.values.update({k: float32(v) for k, v in identity_defaults(identity).items()})
         self._groups: dict[str, tuple[dict[str, float], Any]] = {}
         self.saved: dict[str, float] = {}
         if path is not None and path.exists():

@@ -11,9 +11,9 @@ import dataclasses
 from dataclasses import dataclass
 
 from autopilot.commander import AIRBORNE_PHASES, CommanderParams, CommanderState, Phase, go_to
-from autopilot.controller import Setpoint
 from autopilot.mission_items import PlanStep
 from autopilot.modes import FlightMode
+from autopilot.offboard import Target
 from simbridge.frames import Vec3
 from simbridge.hil import mavlink as mav
 
@@ -81,13 +81,17 @@ def set_mode(
     """Switch flight mode; the vehicle's targets follow from it."""
     if mode == state.mode:
         return state, OK
+    if mode == FlightMode.GUIDED and state.mode in (FlightMode.TAKEOFF, FlightMode.OFFBOARD):
+        return state, OK  # ArduCopter flies both in Guided: already so
     if mode == FlightMode.MISSION and not state.plan:
         return state, Verdict(DENIED, "mission mode denied: no mission uploaded")
     if mode == FlightMode.OFFBOARD and time_s - state.offboard_s > params.offboard_timeout_s:
-        return state, Verdict(DENIED, "offboard denied: no recent position setpoints")
+        return state, Verdict(DENIED, "offboard denied: no recent setpoints (send them first)")
     if mode in (FlightMode.LAND, FlightMode.RETURN) and not airborne(state):
         return state, Verdict(DENIED, f"{mode} denied: not flying")
-    changed = dataclasses.replace(state, mode=mode, target_m=None, reached_s=None)
+    changed = dataclasses.replace(
+        state, mode=mode, target_m=None, reached_s=None, offboard_track=None
+    )
     if mode == FlightMode.MISSION and state.mission_done:
         changed = dataclasses.replace(changed, mission_done=False, current=0)
     if mode == FlightMode.TAKEOFF and airborne(state):
@@ -125,5 +129,27 @@ def change_speed(state: CommanderState, speed_m_s: float) -> tuple[CommanderStat
     return dataclasses.replace(state, speed_m_s=speed_m_s), OK
 
 
-def offboard_setpoint(state: CommanderState, setpoint: Setpoint, time_s: float) -> CommanderState:
-    return dataclasses.replace(state, offboard=setpoint, offboard_s=time_s)
+def offboard_setpoint(state: CommanderState, target: Target, time_s: float) -> CommanderState:
+    return dataclasses.replace(state, offboard=target, offboard_s=time_s)
+
+
+def reposition(
+    state: CommanderState,
+    target_m: Vec3,
+    yaw_deg: float | None,
+    mode: FlightMode,
+    change_mode: bool,
+    time_s: float,
+    position_m: Vec3,
+) -> tuple[CommanderState, Verdict]:
+    """Go to `target_m` and hold there, in `mode` (PX4: hold, whose AUTO.LOITER flies a
+    reposition; ArduCopter: Guided). Only in the air; in another mode only if the request
+    allows a change of mode (DO_REPOSITION's flag 1)."""
+    if not airborne(state):
+        return state, Verdict(DENIED, "go-to denied: not flying (take off first)")
+    if state.mode != mode and not change_mode:
+        return state, Verdict(DENIED, f"go-to denied: in {state.mode} mode (switch to {mode})")
+    changed = dataclasses.replace(state, mode=mode, reached_s=None, offboard_track=None)
+    if state.phase in (Phase.LANDING, Phase.TAKING_OFF):
+        changed = dataclasses.replace(changed, phase=Phase.FLYING, since_s=time_s)
+    return go_to(changed, target_m, position_m, yaw_deg), OK

@@ -17,10 +17,13 @@ import subprocess
 import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
+from autopilot.mission_items import Home
 from mission.plans.formats import load_mission_file
 from simbridge.frames import geodetic_to_local
 from simbridge.launch import start_sim
@@ -65,18 +68,18 @@ class Vehicle:
 
 
 @pytest.fixture
-def vehicle() -> Iterator[Callable[[str, str], Vehicle]]:
-    """Start `groundfx sim` and `groundfx autopilot --identity ID --out URL`; both are ended
-    (terminated, then killed if need be) at teardown."""
+def vehicle() -> Iterator[Callable[..., Vehicle]]:
+    """Start `groundfx sim` and `groundfx autopilot --identity ID --out URL [OPTIONS]`; both
+    are ended (terminated, then killed if need be) at teardown."""
     started: list[subprocess.Popen[str]] = []
 
-    def start(identity: str, out_url: str) -> Vehicle:
-        sim, port = start_sim("default", speedup=SPEEDUP)
+    def start(identity: str, out_url: str, *options: str, speedup: str = SPEEDUP) -> Vehicle:
+        sim, port = start_sim("default", speedup=speedup)
         started.append(sim)
         command = [
             sys.executable, "-m", "mission.cli", "autopilot",
             "--sim", f"tcp:127.0.0.1:{port}", "--identity", identity, "--params-file", "none",
-            "--out", out_url, "--exit-after-landing", "--json",
+            "--out", out_url, "--exit-after-landing", "--json", *options,
         ]  # fmt: skip
         autopilot = subprocess.Popen(
             command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO
@@ -97,6 +100,35 @@ def vehicle() -> Iterator[Callable[[str, str], Vehicle]]:
 
 def square_items() -> tuple[Any, ...]:
     return load_mission_file(EXAMPLES / "square.plan").items
+
+
+def square_8m(home: Home, altitude_m: float) -> list[tuple[float, float, float]]:
+    """The issue's 8 m square (east, north, up of home; relative altitude): its far corner is
+    11.3 m from home, beyond the 10 m fence the vehicle had by default. It starts away from
+    home, so that under ArduPilot MAVSDK's first waypoint, sent as item 0, is not a home row."""
+    return [
+        (8.0, 0.0, altitude_m),
+        (8.0, 8.0, altitude_m),
+        (0.0, 8.0, altitude_m),
+        (0.0, 0.0, altitude_m),
+    ]
+
+
+def closest_approach_m(recording: Path, origin: Home, home: Home, corners: list) -> list[float]:
+    """How close the flown trajectory (the recording the autopilot wrote) came to each corner
+    (east, north, up of `home`), in metres, 3-D."""
+    from learner.flightlogs.recording import read_recording
+
+    xyz = read_recording(recording).trajectory()[:, 1:4]
+    home_east, home_north = geodetic_to_local(
+        origin.lat_deg, origin.lon_deg, home.lat_deg, home.lon_deg
+    )
+    ground = home.alt_m - origin.alt_m
+    out = []
+    for east, north, up in corners:
+        corner = np.array([home_east + east, home_north + north, ground + up])
+        out.append(float(np.min(np.linalg.norm(xyz - corner, axis=1))))
+    return out
 
 
 def distance_m(lat: float, lon: float, to_lat: float, to_lon: float) -> float:

@@ -94,10 +94,12 @@ def test_requests_are_idempotent_and_refusals_say_why():
 @pytest.mark.parametrize("mode", list(FlightMode))
 def test_mode_numbers_round_trip_under_both_identities(mode):
     px4 = custom_mode(mode, "px4")
-    assert decode_mode("px4", px4) == mode  # SET_MODE's packed form
-    assert decode_mode("px4", (px4 >> 16) & 0xFF, (px4 >> 24) & 0xFF) == mode  # DO_SET_MODE
-    if mode != FlightMode.TAKEOFF:  # ArduCopter has no take-off mode
-        assert decode_mode("ardupilot", custom_mode(mode, "ardupilot")) == mode
+    as_px4 = FlightMode.HOLD if mode == FlightMode.GUIDED else mode  # a reposition: AUTO.LOITER
+    assert decode_mode("px4", px4) == as_px4  # SET_MODE's packed form
+    assert decode_mode("px4", (px4 >> 16) & 0xFF, (px4 >> 24) & 0xFF) == as_px4  # DO_SET_MODE
+    # ArduCopter has no take-off or offboard mode: both are flown in Guided
+    as_ardupilot = FlightMode.GUIDED if mode in (FlightMode.TAKEOFF, FlightMode.OFFBOARD) else mode
+    assert decode_mode("ardupilot", custom_mode(mode, "ardupilot")) == as_ardupilot
     assert custom_mode(FlightMode.MISSION, "px4") == 0x04040000
     assert custom_mode(FlightMode.RETURN, "ardupilot") == 6
 
@@ -130,11 +132,11 @@ def test_a_take_off_mode_chosen_in_the_air_climbs_to_the_altitude_then_holds():
     c = step(s, 0.1, (0.0, 0.0, REST))
     c = step(c, 0.31, (0.0, 0.0, REST))
     c = step(c, 4.0, (0.0, 0.0, 1.0))
-    assert c.state.mode == FlightMode.HOLD and "take-off complete: holding" in c.events
+    assert c.state.mode == FlightMode.HOLD and "take-off complete: holding in hold" in c.events
     s, verdict = requests.set_mode(c.state, FlightMode.TAKEOFF, 5.0, (0.4, 0.0, 0.5), PARAMS)
     assert verdict.accepted and s.mode == FlightMode.TAKEOFF  # pulled down to 0.5 m meanwhile
     c = step(s, 5.004, (0.4, 0.0, 0.5))
     assert c.state.mode == FlightMode.TAKEOFF
     assert c.setpoint.position_m == pytest.approx((0.4, 0.0, 1.0126))  # back up, not home
     c = step(c, 9.0, (0.4, 0.0, 1.0126))
-    assert c.state.mode == FlightMode.HOLD and "take-off complete: holding" in c.events
+    assert c.state.mode == FlightMode.HOLD and "take-off complete: holding in hold" in c.events

@@ -114,7 +114,7 @@ def test_parameters_set_read_refuse_and_persist(tmp_path):
 
 def test_a_mission_downloads_identical_and_a_bad_one_leaves_it_in_place():
     doc = load_mission_file(SQUARE)
-    with vehicle(speedup="1") as (gs, _, _):
+    with vehicle("--param", "GF_MAX_HOR_DIST=10", speedup="1") as (gs, _, _):
         gs.upload(doc.items)
         back = gs.download()
         sent = on_the_wire(doc.items)
@@ -259,6 +259,8 @@ def test_sitl_takes_off_flies_offboard_and_a_fence_breach_returns_home():
         [
             *(sys.executable, "-m", "mission.cli", "sitl", "--speedup", "4"),
             *("--params-file", "none", "--out", f"udpout:127.0.0.1:{port}"),
+            *("--param", "MIS_TAKEOFF_ALT=1"),  # PX4's default: 2.5 m
+            *("--param", "GF_ACTION=3"),  # return (PX4's default: hold)
             *("-L", "47.3977419,8.5455938,488,90"),
         ],
         stdout=subprocess.PIPE,
@@ -301,6 +303,13 @@ def test_sitl_takes_off_flies_offboard_and_a_fence_breach_returns_home():
             if m is not None and m.get_type() == "LOCAL_POSITION_NED":
                 east = m.y
         assert abs(east - 0.6) <= 0.05, east
+        # a setpoint it cannot fly is refused, saying why (a frame it does not know)
+        gs.conn.mav.set_position_target_local_ned_send(
+            0, 1, 1, 12, 0b110111111000, 0, 0, -1, 0, 0, 0, 0, 0, 0, 0, 0
+        )
+        gs.wait_for(
+            "the refusal", lambda m: m.get_type() == "STATUSTEXT" and "frame 12" in m.text, 5.0
+        )
         assert gs.set_param("GF_MAX_HOR_DIST", 0.3) == pytest.approx(0.3)  # now outside
         gs.wait_for(
             "return mode after the breach",

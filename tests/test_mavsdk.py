@@ -17,6 +17,7 @@ from mavsdk.asyncio import Autopilot, ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan
 from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
+from mavsdk.asyncio.plugins.offboard import OffboardAsync
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import LandedState, TelemetryAsync
 
@@ -127,19 +128,24 @@ class Client:
     mission: MissionAsync
     raw: MissionRawAsync
     param: ParamAsync
+    offboard: OffboardAsync
 
     def destroy(self) -> None:
         """Before the Mavsdk instance goes. Left to garbage collection, a plugin can be
         destroyed in an executor thread while Mavsdk is destroyed: mavsdk 4.1 aborts."""
-        for plugin in (self.telemetry, self.action, self.mission, self.raw, self.param):
+        plugins = (self.telemetry, self.action, self.mission, self.raw, self.param, self.offboard)
+        for plugin in plugins:
             plugin.destroy()
 
 
 async def with_mavsdk(
-    port: int, identity: str, fly: Callable[[Client], Awaitable[dict[str, Any]]]
+    port: int,
+    identity: str,
+    fly: Callable[[Client], Awaitable[dict[str, Any]]],
+    acceptance_m: float | None = LANDING_ACCEPTANCE_M,
 ) -> dict[str, Any]:
-    """Connect MAVSDK to the autopilot, wait until it is healthy, set NAV_ACC_RAD, then
-    `fly`."""
+    """Connect MAVSDK to the autopilot, wait until it is healthy, set NAV_ACC_RAD (unless
+    `acceptance_m` is None: the defaults), then `fly`."""
     config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
     async with Mavsdk(config) as sdk:
         await within("connect", 5, sdk.add_any_connection(f"udpout://127.0.0.1:{port}"))
@@ -153,6 +159,7 @@ async def with_mavsdk(
             MissionAsync(system),
             MissionRawAsync(system),
             ParamAsync(system),
+            OffboardAsync(system),
         )
         try:
             await first(
@@ -161,11 +168,10 @@ async def with_mavsdk(
                 client.telemetry.subscribe_health(),
                 lambda h: h.is_global_position_ok and h.is_home_position_ok and h.is_armable,
             )
-            await within(
-                "set NAV_ACC_RAD",
-                5,
-                client.param.set_param_float("NAV_ACC_RAD", LANDING_ACCEPTANCE_M),
-            )
+            if acceptance_m is not None:
+                await within(
+                    "set NAV_ACC_RAD", 5, client.param.set_param_float("NAV_ACC_RAD", acceptance_m)
+                )
             return await fly(client)
         finally:
             client.destroy()

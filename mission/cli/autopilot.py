@@ -134,7 +134,7 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
         if doc.waypoint_timeout_s is not None and "GFX_WP_TIMEOUT" not in overrides:
             overrides["GFX_WP_TIMEOUT"] = doc.waypoint_timeout_s
     params_file = None if str(args.params_file) == "none" else args.params_file
-    params = ParamStore(params_file, overrides)
+    params = ParamStore(params_file, overrides, args.identity)
     gcs_urls = () if args.no_gcs else tuple(args.out or DEFAULT_GCS_URLS)
     stop = []
     config = AutopilotConfig(
