@@ -136,6 +136,7 @@ def _cases() -> list[Case]:
                 f"ceiling_effect_{tag}",
                 ({"name": "ceiling_effect", "rho": rho},),
                 {"ceiling_effect": {"rho": rho}},
+                kind="ceiling",
                 world={"ceiling_height_m": 0.85},
             )
         )
