@@ -12,7 +12,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from simbridge.effects.actuators import motor_lag_step
+from simbridge.effects.actuators import motor_lag_step, thrust_axis_body
 from simbridge.effects.drag import body_drag_n, rotor_drag_n, wind_velocity_m_s
 from simbridge.effects.ground import ground_effect_force_n, thrust_gain
 from simbridge.effects.learned import learned_force_n
@@ -97,6 +97,10 @@ class Simulation:
         self._ce = fx.ceiling_effect
         self._ce_cutoff = self._ce.cutoff_for(self._radius) if self._ce else 0.0
         self._lag_tau = fx.motor_lag.time_constant_s if fx.motor_lag else None
+        # the thrust's direction in the body frame (body z unless it leans)
+        self._axis = (
+            thrust_axis_body(*fx.thrust_tilt.lean_deg) if fx.thrust_tilt else (0.0, 0.0, 1.0)
+        )
         self._drag = fx.rotor_drag is not None or fx.body_drag is not None
         self._learned = fx.learned_residual
         self._learned_force = _zero3()
@@ -274,7 +278,12 @@ class Simulation:
             self._ce_force[:] = (m[2] * extra, m[5] * extra, m[8] * extra)
             f = boosted
         thrust, mx, my, mz = thrust_and_moments(f, self._arm, self._kz)  # equation 3.6, body
-        force = [m[2] * thrust, m[5] * thrust, m[8] * thrust]
+        ax, ay, az = self._axis
+        force = [
+            (m[0] * ax + m[1] * ay + m[2] * az) * thrust,
+            (m[3] * ax + m[4] * ay + m[5] * az) * thrust,
+            (m[6] * ax + m[7] * ay + m[8] * az) * thrust,
+        ]
         torque = [
             m[0] * mx + m[1] * my + m[2] * mz,
             m[3] * mx + m[4] * my + m[5] * mz,
