@@ -12,7 +12,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from simbridge.effects.actuators import motor_lag_step
+from simbridge.effects.actuators import motor_lag_step, thrust_axis_body
 from simbridge.effects.drag import body_drag_n, rotor_drag_n, wind_velocity_m_s
 from simbridge.effects.ground import ground_effect_forces_n, thrust_gain
 from simbridge.effects.learned import learned_force_n
@@ -99,6 +99,8 @@ class Simulation:
         self._ce = fx.ceiling_effect
         self._ce_cutoff = self._ce.cutoff_for(self._radius) if self._ce else 0.0
         self._lag_tau = fx.motor_lag.time_constant_s if fx.motor_lag else None
+        # the thrust's direction in the body frame (body z unless it leans)
+        self._axis = thrust_axis_body(*fx.thrust_tilt.lean_deg) if fx.thrust_tilt else None
         self._drag = fx.rotor_drag is not None or fx.body_drag is not None
         self._learned = fx.learned_residual
         self._learned_force = _zero3()
@@ -324,7 +326,15 @@ class Simulation:
             f = boosted
             tm = thrust_and_moments(f, self._arm, self._kz)
         thrust, mx, my, mz = tm
-        force = [m2 * thrust, m5 * thrust, m8 * thrust]
+        if self._axis is None:  # the thrust along body z
+            force = [m2 * thrust, m5 * thrust, m8 * thrust]
+        else:  # a thrust axis leaning from body z (thrust_tilt)
+            ax, ay, az = self._axis
+            force = [
+                (m0 * ax + m1 * ay + m2 * az) * thrust,
+                (m3 * ax + m4 * ay + m5 * az) * thrust,
+                (m6 * ax + m7 * ay + m8 * az) * thrust,
+            ]
         tx = m0 * mx + m1 * my + m2 * mz
         ty = m3 * mx + m4 * my + m5 * mz
         tz = m6 * mx + m7 * my + m8 * mz

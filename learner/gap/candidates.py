@@ -23,6 +23,7 @@ from scipy.signal import lfilter
 
 from learner.gap.flightdata import FlightData
 from simbridge.effects import EffectSet
+from simbridge.effects.actuators import thrust_axis_body
 from simbridge.effects.drag import BodyDragParams, RotorDragParams, body_drag_n, rotor_drag_n
 from simbridge.effects.ground import (
     CeilingEffectParams,
@@ -64,6 +65,9 @@ BIAS_MAX_M_S2 = 5.0
 # past the simulator's own range (simbridge/effects/drag.py: +-30 m/s).
 WIND_MAX_M_S = 20.0
 SIM_WIND_MAX_M_S = 30.0
+# The fit's range of a thrust axis's lean, well past the physical 3 deg (PHYSICAL), so that a
+# steady force read as a lean is seen at its value and called implausible
+TILT_MAX_DEG = 15.0
 
 REFERENCE: tuple[Candidate, ...] = (
     Candidate("ground_effect", ("rho",), ("1",), (0.01,), (RHO_MAX,), (1.0,), ("ground_effect",)),
@@ -82,6 +86,10 @@ REFERENCE: tuple[Candidate, ...] = (
     Candidate(
         "thrust_mass", ("c",), ("1",), (-0.5,), (1.0,), (0.05,),
         ("thrust_coefficient", "mass_error"),
+    ),
+    Candidate(
+        "thrust_tilt", ("ax", "ay"), ("deg",) * 2, (-TILT_MAX_DEG,) * 2, (TILT_MAX_DEG,) * 2,
+        (0.5,) * 2, ("thrust_tilt",),
     ),
     Candidate(
         "sensor_bias", ("bx", "by", "bz"), ("m/s^2",) * 3, (-BIAS_MAX_M_S2,) * 3,
@@ -133,6 +141,15 @@ PHYSICAL: dict[str, tuple[tuple[float, ...], tuple[float, ...], str]] = {
         (0.3,),
         "a thrust or mass 30% off: the wrong vehicle, or thrust "
         "in the wrong units, rather than an effect",
+    ),
+    # a frame bent or motors mounted askew, or an IMU mounted off the body's axes: a few
+    # degrees is what goes unnoticed on a flying vehicle (a multirotor's motor mounts are
+    # level within 1-2 deg; an IMU board's mounting within about 2 deg)
+    "thrust_tilt": (
+        (-3.0,) * 2,
+        (3.0,) * 2,
+        "a thrust axis leaning more than 3 deg from the body's z: a frame bent or an IMU "
+        "mounted that far askew is seen on the bench; rather a force in the world (wind)",
     ),
     # a calibrated MEMS IMU: offsets of 20-70 mg (BMI088 20 mg, MPU-6050 60 mg) before the
     # estimator removes them; 0.1 g is beyond a working accelerometer's
@@ -272,6 +289,8 @@ def nominal_values(effects: EffectSet, vehicle: Vehicle | None = None) -> Values
         out["wind"] = np.array(effects.wind.mean_m_s[:2])  # the candidate is horizontal
     if effects.motor_lag:
         out["motor_lag"] = np.array([effects.motor_lag.time_constant_s])
+    if effects.thrust_tilt:
+        out["thrust_tilt"] = np.array(effects.thrust_tilt.lean_deg)
     s = effects.thrust_coefficient.scale if effects.thrust_coefficient else 1.0
     k = effects.mass_error.scale if effects.mass_error else 1.0
     if s != 1.0 or k != 1.0:
@@ -303,12 +322,11 @@ def world_force(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
     """(N, 3) world-frame force besides gravity that makes m a of the log (see module doc)."""
     f = rotor_forces_n(values, d, vehicle)
     radius = vehicle.rotor_radius_m
-    ez = d.rotation[:, :, 2]  # body z in the world
     if "ceiling_effect" in values:
         p = CeilingEffectParams(rho=float(values["ceiling_effect"][0]))
         f = f * (1.0 + thrust_gain_array(d.rotor_ceilings_m, p.rho, radius, p.cutoff_for(radius)))
     thrust = f.sum(axis=1)
-    force = ez * thrust[:, None]
+    force = _thrust_axis(values, d) * thrust[:, None]
     if "ground_effect" in values:
         p = GroundEffectParams(rho=float(values["ground_effect"][0]))
         gain = thrust_gain_array(d.rotor_heights_m, p.rho, radius, p.cutoff_for(radius))
@@ -328,6 +346,14 @@ def world_force(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
     if "sensor_bias" in values:
         force += vehicle.mass_kg * np.einsum("nij,j->ni", d.rotation, values["sensor_bias"])
     return force
+
+
+def _thrust_axis(values: Values, d: FlightData) -> np.ndarray:
+    """(N, 3) the thrust's direction in the world: body z, or the leaning axis."""
+    if "thrust_tilt" not in values:
+        return d.rotation[:, :, 2]
+    ax, ay, az = thrust_axis_body(*(float(a) for a in values["thrust_tilt"]))
+    return np.einsum("nij,j->ni", d.rotation, np.array([ax, ay, az]))
 
 
 def _drag(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
@@ -373,6 +399,8 @@ def to_world_effects(values: Values, vehicle: Vehicle | None = None) -> list[dic
             out.append({"name": name, "time_constant_s": x[0]})
         elif name == "thrust_mass":
             out.append({"name": "thrust_coefficient", "scale": 1.0 + x[0]})
+        elif name == "thrust_tilt":
+            out.append({"name": name, "lean_deg": x[:2]})
         elif name == "sensor_bias":
             out.append({"name": name, "accel_bias_m_s2": x})
         elif name == "sensor_latency":

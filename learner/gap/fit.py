@@ -102,7 +102,14 @@ def start_values(name: str, nominal: Values, cat: dict[str, Candidate] | None = 
     c = (cat or CANDIDATES)[name]
     if name in nominal:
         return np.array(nominal[name], dtype=float)
-    if name in ("wind", "thrust_mass", "sensor_bias", "sensor_latency", "wall_effect"):
+    if name in (
+        "wind",
+        "thrust_mass",
+        "thrust_tilt",
+        "sensor_bias",
+        "sensor_latency",
+        "wall_effect",
+    ):
         return np.zeros(len(c.params)) + (0.004 if name == "sensor_latency" else 0.0)
     return np.array(c.typical, dtype=float)
 

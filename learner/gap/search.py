@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from learner.gap import bias_or_tilt
 from learner.gap.candidates import implausible_parameters
 from learner.gap.fit import (
     COLLINEAR_R2,
@@ -120,7 +121,8 @@ def collinear_with_chosen(problem: Problem, f: Fit, added: tuple[str, ...]) -> l
 
 def set_problems(problem: Problem, f: Fit) -> dict:
     """What makes a fitted set unphysical: members on a bound of the fit, members outside
-    their physical range, cancelling pairs."""
+    their physical range, cancelling pairs, an accelerometer bias or a leaning thrust the
+    logged acceleration contradicts (learner/gap/bias_or_tilt.py)."""
     cat = problem.catalogue
     hits = {n: bound_hits(n, f.values[n], cat) for n in f.names}
     implausible = {n: implausible_parameters(n, f.values[n], cat) for n in f.names}
@@ -128,7 +130,24 @@ def set_problems(problem: Problem, f: Fit) -> dict:
         "at_bound": {n: h for n, h in hits.items() if h},
         "implausible": {n: v for n, v in implausible.items() if v},
         "cancelling": cancelling_pairs(problem, f),
+        "contradicted": _contradicted(problem, f),
     }
+
+
+def _contradicted(problem: Problem, f: Fit) -> dict[str, str]:
+    members = [n for n in f.names if n in bias_or_tilt.BIAS_OR_TILT]
+    if not members:
+        return {}
+    logged = bias_or_tilt.logged_offset_m_s2(problem.flights)
+    if logged is None:
+        return {}
+    parts = contributions(problem, f)
+    out = {}
+    for n in members:
+        why = bias_or_tilt.contradicted(n, parts[n], logged, problem.vehicle.mass_kg)
+        if why:
+            out[n] = why
+    return out
 
 
 def forward_search(problem: Problem, candidates: list[str], folds: int) -> tuple[Fit, list[dict]]:
@@ -185,7 +204,11 @@ def _judge(
     issues = set_problems(problem, f)
     issues["collinear"] = collinear_with_chosen(problem, f, added)
     physical = not (
-        issues["at_bound"] or issues["implausible"] or issues["cancelling"] or issues["collinear"]
+        issues["at_bound"]
+        or issues["implausible"]
+        or issues["cancelling"]
+        or issues["collinear"]
+        or issues["contradicted"]
     )
     # the rest of the rule first: cross-validation is the costly part
     cheap_ok = selected(current.bic - f.bic, p_value, tried, np.inf, size, physical)
@@ -211,6 +234,7 @@ def _judge(
         "implausible": issues["implausible"],
         "cancelling": issues["cancelling"],
         "collinear": issues["collinear"],
+        "contradicted": issues["contradicted"],
         "significant": bool(current.bic - f.bic > 0 and p_value < _alpha(tried)),
         "selected": bool(ok),
     }

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from learner.gap import bias_or_tilt
 from learner.gap import fit as gapfit
 from learner.gap.candidates import CANDIDATES, Values, implausible_parameters
 from learner.gap.flightdata import FlightData
@@ -51,7 +52,10 @@ def effect_report(
                 )
                 >= gapfit.COLLINEAR_R2
             )
-            ruled_out = _alternatives_ruled_out(problem, best, name, group)
+            carried: dict[str, dict[str, float]] = {}
+            ruled_out = _alternatives_ruled_out(problem, best, name, group, carried)
+            if carried:  # what each alternative left in the group would take
+                entry["alternatives_carry"] = carried
             if ruled_out:
                 entry["alternatives_ruled_out"] = ruled_out
                 group = [g for g in group if g not in ruled_out]
@@ -101,27 +105,58 @@ def effect_report(
             for other in entry.get("group", []):
                 o = out[other]
                 if o["status"] == "absent" or o.get("why", "").startswith("cancels"):
+                    carry = entry.get("alternatives_carry", {}).get(_candidate_of(other))
                     out[other] = {
                         **{k: v for k, v in o.items() if k != "parameters"},
                         "status": "not identifiable",
                         "group": entry["group"],
                         "why": f"indistinguishable from {name}, which carries the fitted "
-                        "value: " + ", ".join(entry["group"]),
+                        "value: " + ", ".join(entry["group"]) + _carry_text(other, carry),
                     }
+                    if carry:
+                        out[other]["carried_as"] = carry
     return out
 
 
+def _candidate_of(effect: str) -> str:
+    """The candidate standing for a catalogue effect (mass_error: thrust_mass)."""
+    return next(n for n, c in CANDIDATES.items() if effect in c.effects)
+
+
+def _carry_text(effect: str, carry: dict[str, float] | None) -> str:
+    """'; in its place it would take ax 2.4 deg, ay -0.8 deg' (nothing without a value)."""
+    if not carry:
+        return ""
+    cand = CANDIDATES[_candidate_of(effect)]
+    units = dict(zip(cand.params, cand.units, strict=True))
+    parts = ", ".join(
+        f"{p} {v:.3g}" + ("" if units[p] == "1" else f" {units[p]}") for p, v in carry.items()
+    )
+    return f"; in its place it would take {parts}"
+
+
 def _alternatives_ruled_out(
-    problem: gapfit.Problem, best: gapfit.Fit, name: str, group: list[str]
+    problem: gapfit.Problem,
+    best: gapfit.Fit,
+    name: str,
+    group: list[str],
+    carried: dict[str, dict[str, float]] | None = None,
 ) -> dict[str, str]:
     """Of the candidates the data cannot tell from `name`, those that could carry its share
     only at a value outside their physical range or on a bound (a 3.6 m/s wind read as an
-    accelerometer bias of 1.3 m/s^2): physics tells them apart. Candidate -> why."""
+    accelerometer bias of 1.3 m/s^2): physics tells them apart. Candidate -> why. The others'
+    values, swapped in for `name`, go into `carried` (candidate -> parameter -> value: a wind
+    of 1.9 m/s or a lean of 2.4 deg)."""
     out = {}
     cat = problem.catalogue
     for other in group:
         if other in best.values:
             continue
+        if {name, other} == bias_or_tilt.BIAS_OR_TILT:
+            why = _bias_or_tilt(problem, best, name, other)
+            if why:
+                out[other] = why
+                continue
         names = tuple(other if n == name else n for n in best.names)
         alt = gapfit.fit(problem, names, max_nfev=60, start=best.values)
         bad = implausible_parameters(other, alt.values[other], cat)
@@ -143,7 +178,23 @@ def _alternatives_ruled_out(
                 f"swapped in for {name}, it fits the flights worse (BIC "
                 f"+{alt.bic - best.bic:.0f}), and beside it the two do not trade off"
             )
+        elif carried is not None:
+            params = CANDIDATES[other].params
+            carried[other] = {p: float(v) for p, v in zip(params, alt.values[other], strict=True)}
     return out
+
+
+def _bias_or_tilt(problem: gapfit.Problem, best: gapfit.Fit, name: str, other: str) -> str | None:
+    """An accelerometer bias against a leaning thrust axis, told apart by the logged
+    acceleration's mean against the velocity's change (learner/gap/bias_or_tilt.py)."""
+    logged = bias_or_tilt.logged_offset_m_s2(problem.flights)
+    if logged is None:
+        return None
+    rest = {k: v for k, v in best.values.items() if k != name}
+    parts = [a - b for a, b in zip(problem.predicted(best.values), problem.predicted(rest),
+                                   strict=True)]  # fmt: skip
+    member = bias_or_tilt.member_offset_m_s2(np.concatenate(parts), problem.vehicle.mass_kg)
+    return bias_or_tilt.ruled_out(other, member, logged)
 
 
 def _trades_off(problem: gapfit.Problem, best: gapfit.Fit, name: str, other: str) -> float:

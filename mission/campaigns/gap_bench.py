@@ -16,7 +16,7 @@ import yaml
 from mission.campaigns.gap_bench_cases import Case, real_effects
 from mission.campaigns.gap_bench_ooc import summary as ooc_summary
 from mission.campaigns.gap_bench_ooc import verdict, verdict_text
-from mission.campaigns.gap_flights import BENCH_NOISE, bench_mission, real_log
+from mission.campaigns.gap_flights import AUTOPILOT_PARAMS, BENCH_NOISE, bench_mission, real_log
 
 FIT_SEEDS = (0, 1)
 HOLD_SEEDS = (100,)
@@ -32,7 +32,8 @@ def _world_file(path: Path, case: Case, effects: tuple[dict, ...]) -> Path:
 
 
 def _drop_stale_flights(folder: Path, key_text: str) -> None:
-    """Cached flights are reused only for the same real world and mission kind."""
+    """Cached flights are reused only for the same real world, missions and autopilot
+    parameters."""
     key = hashlib.sha256(key_text.encode()).hexdigest()[:16]
     stamp = folder / "flights.key"
     if stamp.exists() and stamp.read_text() == key:
@@ -51,10 +52,11 @@ def run_case(case: Case, out: Path, replay: bool = True, record: bool = False) -
     folder = out / case.name
     real = _world_file(folder / "real_world.yaml", case, real_effects(case))
     nominal = _world_file(folder / "nominal_world.yaml", case, case.nominal)
-    _drop_stale_flights(folder, real.read_text() + case.kind)
+    ceiling = case.world.get("ceiling_height_m")
+    missions = {s: bench_mission(case.kind, s, ceiling) for s in FIT_SEEDS + HOLD_SEEDS}
+    _drop_stale_flights(folder, real.read_text() + repr(missions) + repr(AUTOPILOT_PARAMS))
     logs = {}
-    for seed in FIT_SEEDS + HOLD_SEEDS:
-        mission = bench_mission(case.kind, seed)
+    for seed, mission in missions.items():
         path = folder / f"flight{seed}.csv"
         logs[seed] = real_log(mission, real, path, BENCH_NOISE, seed, record)
     result = run_diagnosis(

@@ -103,6 +103,17 @@ def _cases() -> list[Case]:
                 {"mass_error": {"scale": s}},
             )
         )
+    # a thrust axis leaning (a bent frame, motors mounted askew): at one heading a steady
+    # sideways force, which the vertical legs' changing thrust and the logged acceleration
+    # (it follows the velocity; a bias's does not) tell from a bias and a wind
+    for tag, lean in (("a", [1.5, 0.0]), ("b", [-2.0, 1.0])):
+        c.append(
+            Case(
+                f"thrust_tilt_{tag}",
+                ({"name": "thrust_tilt", "lean_deg": lean},),
+                {"thrust_tilt": dict(zip(("ax", "ay"), lean, strict=True))},
+            )
+        )
     for tag, b in (("a", [0.2, -0.1, 0.15]), ("b", [0.5, 0.3, -0.4])):
         c.append(
             Case(
@@ -136,6 +147,7 @@ def _cases() -> list[Case]:
                 f"ceiling_effect_{tag}",
                 ({"name": "ceiling_effect", "rho": rho},),
                 {"ceiling_effect": {"rho": rho}},
+                kind="ceiling",
                 world={"ceiling_height_m": 0.85},
             )
         )

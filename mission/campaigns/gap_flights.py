@@ -29,15 +29,40 @@ BENCH_NOISE: dict[str, float] = {
 # than the autopilot's model, the vehicle sinks ever slower onto a cushion a few mm above its
 # touchdown height (rho 2.5 against the model's 1: 21 mm after 75 s of landing).
 MAX_FLIGHT_S = 60.0
-KINDS = ("mixed", "hover", "aggressive", "wall")
+KINDS = ("mixed", "hover", "aggressive", "wall", "ceiling")
+# Identification flights climb and descend faster than a cautious default: the rotor drag's
+# vertical coefficient is seen only through vertical speed, which legs cruising at nearly
+# one height hardly have (0.09 m/s RMS). The limits clip the position loop's error at speed
+# x lead (1 s), so moves shorter than that are the loop's plain step, as before.
+VERTICAL_SPEED_M_S = 1.0
+AUTOPILOT_PARAMS: tuple[str, ...] = (
+    f"MPC_Z_V_AUTO_UP={VERTICAL_SPEED_M_S}",
+    f"MPC_Z_V_AUTO_DN={VERTICAL_SPEED_M_S}",
+)
+# Vertical legs of `mixed` and `aggressive` flights: from the last cruising waypoint down to
+# the low height, up to the high one, twice (1 m steps peak near 0.8 m/s), then on to the
+# low pass. Both heights well clear of the ground's and a 3 m ceiling's reach.
+VERTICAL_LEG_HEIGHTS_M = (0.25, 1.25, 0.25, 1.25)
+# Where a flight lingers by a surface whose effect it should measure, in rotor radii of the
+# reference vehicle (0.047 m): close enough for a force of a few mN at the catalogue's
+# typical strength, far enough that the effect's pull (the ceiling's rising as the gap
+# closes, a wall's towards it) stays well below the position loop's stiffness.
+WALL_HOLD_RADII = 2.1
+CEILING_HOLD_RADII = 3.0
+REFERENCE_ROTOR_RADIUS_M = 0.047
+SURFACE_HOLD_S = 3.0
 
 
-def bench_mission(kind: str, seed: int) -> dict[str, Any]:
-    """A short seeded mission. `mixed`: cruising at 1 m/s at several heights and a low pass
-    at 4 cm; `hover`: holds at 0.5 m and 6 cm; `aggressive`: long legs at 2.5 m/s;
-    `wall`: like mixed, but passing close to a wall at y = 0.6 m."""
+def bench_mission(kind: str, seed: int, ceiling_m: float | None = None) -> dict[str, Any]:
+    """A short seeded mission. `mixed`: cruising at 1 m/s at several heights, vertical legs
+    and a low pass at 4 cm; `hover`: holds at 0.5 m and 6 cm; `aggressive`: long legs at
+    2.5 m/s, then the same vertical legs; `wall`: like mixed without the vertical legs,
+    holding close to a wall at y = 0.6 m; `ceiling`: like `wall`, holding under the ceiling
+    at `ceiling_m` (required) instead."""
     if kind not in KINDS:
         raise ValueError(f"mission kind {kind!r}: expected one of {', '.join(KINDS)}")
+    if kind == "ceiling" and ceiling_m is None:
+        raise ValueError("mission kind 'ceiling': ceiling_m (the ceiling's height) is required")
     rng = random.Random(f"{kind}-{seed}")
     if kind == "hover":
         x, y = rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3)
@@ -68,13 +93,31 @@ def bench_mission(kind: str, seed: int) -> dict[str, Any]:
     if kind == "wall":  # the wall stands at y = 0.6 m: every other waypoint on this side
         for wp in wps:
             wp["position_m"][1] = min(wp["position_m"][1], 0.3)
-        wps[1] = {"position_m": [rng.uniform(-0.5, 0.5), 0.45, 0.5], "hold_s": 1.5,
-                  "acceptance_radius_m": 0.05, "speed_m_s": 0.5}  # fmt: skip
+        wall_y = 0.6 - WALL_HOLD_RADII * REFERENCE_ROTOR_RADIUS_M
+        wps[1] = _surface_hold([rng.uniform(-0.5, 0.5), wall_y, 0.5])
+    if kind == "ceiling" and ceiling_m is not None:
+        ceiling_z = ceiling_m - CEILING_HOLD_RADII * REFERENCE_ROTOR_RADIUS_M
+        for wp in wps:  # cruising legs stay below the hold
+            wp["position_m"][2] = min(wp["position_m"][2], ceiling_z)
+        wps.insert(2, _surface_hold([*wps[1]["position_m"][:2], ceiling_z]))
+    if kind in ("mixed", "aggressive"):
+        x, y = wps[-1]["position_m"][:2]
+        wps += [
+            {"position_m": [x, y, z], "hold_s": 0.0, "acceptance_radius_m": 0.15}
+            for z in VERTICAL_LEG_HEIGHTS_M
+        ]
     x, y = rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3)
     wps.append(
         {"position_m": [x, y, 0.04], "hold_s": 1.0, "acceptance_radius_m": 0.02, "timeout_s": 3.0}
     )
     return {"name": f"{kind} {seed}", "takeoff_altitude_m": 0.3, "waypoints": wps, "land": True}
+
+
+def _surface_hold(position_m: list[float]) -> dict[str, Any]:
+    """A slow approach to `position_m` and a hold there (timed out if an effect holds the
+    vehicle off it)."""
+    return {"position_m": position_m, "hold_s": SURFACE_HOLD_S, "acceptance_radius_m": 0.03,
+            "timeout_s": 4.0, "speed_m_s": 0.5}  # fmt: skip
 
 
 def fly_log(
@@ -103,6 +146,7 @@ def fly_log(
     summary = fly(path, str(world), model, rho=1.0, via_gcs=False, flight_log=raw,
                   record=out.with_suffix(".rrd") if record else False,
                   max_flight_s=max_flight_s, trajectory=track,
+                  autopilot_options=[a for p in AUTOPILOT_PARAMS for a in ("--param", p)],
                   sim_options=["--ideal-sensors"])  # fmt: skip
     if not summary.get("landed") and not _ended_landing(track):
         raise RuntimeError(f"{out.name}: the flight did not land ({summary.get('ended')})")

@@ -10,7 +10,12 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from simbridge.config import ConfigError, build
-from simbridge.effects.actuators import MassErrorParams, MotorLagParams, ThrustCoefficientParams
+from simbridge.effects.actuators import (
+    MassErrorParams,
+    MotorLagParams,
+    ThrustCoefficientParams,
+    ThrustTiltParams,
+)
 from simbridge.effects.drag import BodyDragParams, RotorDragParams, WindParams
 from simbridge.effects.ground import CeilingEffectParams, GroundEffectParams
 from simbridge.effects.learned import LearnedResidualParams
@@ -37,6 +42,7 @@ class EffectSet:
     motor_lag: MotorLagParams | None = None
     thrust_coefficient: ThrustCoefficientParams | None = None
     mass_error: MassErrorParams | None = None
+    thrust_tilt: ThrustTiltParams | None = None
     sensor_latency: SensorLatencyParams | None = None
     sensor_bias: SensorBiasParams | None = None
     learned_residual: LearnedResidualParams | None = None  # what a gap diagnosis learnt
@@ -61,6 +67,7 @@ PARAMS_BY_NAME: dict[str, type] = {
     "motor_lag": MotorLagParams,
     "thrust_coefficient": ThrustCoefficientParams,
     "mass_error": MassErrorParams,
+    "thrust_tilt": ThrustTiltParams,
     "sensor_latency": SensorLatencyParams,
     "sensor_bias": SensorBiasParams,
     "learned_residual": LearnedResidualParams,
