@@ -153,7 +153,7 @@ def mission_path(
 
 
 def merged_points(
-    points: Sequence[Vec3], labels: Sequence[str], within_m: float = 0.01
+    points: Sequence[Vec3], labels: Sequence[str], within_m: float = 0.05
 ) -> tuple[list[Vec3], list[str]]:
     """Items at one place drawn as one point with one label ("takeoff 0, waypoint 4"): labels
     drawn on top of each other cannot be read."""
