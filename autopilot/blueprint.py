@@ -19,7 +19,8 @@ from simbridge.frames import Vec3
 
 EYE_OFFSET_M = (-1.3, -1.3, 2.2)  # where the 3-D camera stands, from the point it looks at
 DEFAULT_Z_RANGE_M = (-0.05, 1.5)  # the z view's range until a mission gives its heights
-Z_MARGIN_M = (0.05, 0.25)  # below the lowest and above the highest point of the mission
+Z_MARGIN_M = (0.05, 0.25)
+NEAR_GROUND_RANGE_M = (-0.005, 0.1)  # below the lowest and above the highest point of the mission
 
 
 def z_range_m(path_m: list[Vec3] | tuple[Vec3, ...]) -> tuple[float, float]:
@@ -55,14 +56,23 @@ def default_blueprint(
     status = rrb.Tabs(
         rrb.TextLogView(origin=EVENTS, name="events"),
         rrb.TimeSeriesView(origin="plots/mode", name="mode"),
-        rrb.TimeSeriesView(origin=MAVLINK, name="MAVLink counters"),
+        rrb.TimeSeriesView(origin=f"{MAVLINK}/sim", name="MAVLink: simulator link"),
+        rrb.TimeSeriesView(origin=f"{MAVLINK}/gcs", name="MAVLink: ground stations"),
         *learner,
     )
-    z = rrb.TimeSeriesView(
-        origin="plots",
-        contents=["plots/z", "plots/height"],
-        name="z and its setpoint (m)",
-        axis_y=rrb.ScalarAxis(range=z_view_m),
+    z = rrb.Tabs(
+        rrb.TimeSeriesView(
+            origin="plots",
+            contents=["plots/z", "plots/height"],
+            name="z and its setpoint (m)",
+            axis_y=rrb.ScalarAxis(range=z_view_m),
+        ),
+        rrb.TimeSeriesView(  # the hold and the touchdown, to the millimetre
+            origin="plots",
+            contents=["plots/z", "plots/height"],
+            name="near the ground (m, lowest 10 cm)",
+            axis_y=rrb.ScalarAxis(range=NEAR_GROUND_RANGE_M),
+        ),
     )
     ge = rrb.Vertical(
         rrb.TimeSeriesView(origin="plots/ground_effect/z", name="ground effect z (N)"),

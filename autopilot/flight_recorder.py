@@ -42,6 +42,7 @@ from learner.flightlogs.recording import (
     MAVLINK,
     META,
     SERIES,
+    SUMMARY,
     TIMELINE,
 )
 from simbridge.frames import Vec3
@@ -214,11 +215,15 @@ class FlightRecorder:
         names, colors = counter_style(link)
         self._rec.log(path, rr.SeriesLines(names=names, colors=colors), static=True)
 
-    def close(self, ended: str) -> None:
-        """Flush everything, note how the flight ended, and finish the file (with its footer)."""
+    def close(self, ended: str, summary: dict[str, Any] | None = None) -> None:
+        """Flush everything, note how the flight ended (and its summary, as `groundfx fly
+        --json` prints it), and finish the file (with its footer)."""
         if self._closed:
             return
         self._closed = True
+        if summary is not None:
+            text = json.dumps(summary, indent=1, default=str)
+            self._rec.log(SUMMARY, rr.TextDocument(text, media_type="text/plain"), static=True)
         level = "INFO" if ended == "landed" else "WARN"
         self._events.append((self._last_t, level, f"flight ended: {ended}"))
         self.flush()

@@ -16,7 +16,7 @@ last flush (and the footer: the reader copes).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from autopilot.record_options import RecordOptions
 
@@ -56,7 +56,7 @@ class Recorder(Protocol):
     def mission(
         self, plan: Sequence[PlanStep], start_m: Vec3, home_m: Vec3 | None, t_s: float
     ) -> None: ...
-    def close(self, ended: str) -> None: ...
+    def close(self, ended: str, summary: dict[str, Any] | None = None) -> None: ...
     def stats(self) -> dict[str, float]: ...
 
 
@@ -83,7 +83,7 @@ class NullRecorder:
     ) -> None:
         pass
 
-    def close(self, ended: str) -> None:
+    def close(self, ended: str, summary: dict[str, Any] | None = None) -> None:
         pass
 
     def stats(self) -> dict[str, float]:

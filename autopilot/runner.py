@@ -396,43 +396,46 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         online_summary = online.close()
         station.save_signing(time.monotonic())
         gcs.close()
-        # an exception on its way out (Ctrl-C, SIGTERM) ended the flight, not `ended`
-        recorder.close(ended if sys.exc_info()[0] is None else "interrupted")
-    log = np.asarray(rows, dtype=float).reshape(-1, len(COLUMNS))
+        if sys.exc_info()[0] is not None:  # an exception on its way out ended the flight
+            recorder.close("interrupted")
     summary: dict[str, Any] = {"ended": ended, "landed": ended == "landed"}
-    if len(log):
-        summary.update(flight_metrics(log, MODES, landing_target_xy(cmd_state), resting_height))
-        sim_s = float(log[-1, 0] - log[0, 0])
+    try:
+        log = np.asarray(rows, dtype=float).reshape(-1, len(COLUMNS))
+        if len(log):
+            summary.update(flight_metrics(log, MODES, landing_target_xy(cmd_state), resting_height))
+            sim_s = float(log[-1, 0] - log[0, 0])
+            summary.update(
+                sim_s=sim_s,
+                wall_s=wall,
+                rtf=sim_s / wall if wall > 0 else 0.0,
+                steps=len(log),
+                trajectory_sha256=trajectory_sha256(log),
+            )
+        summary.update(estimator_metrics(np.asarray(nav_errors).reshape(-1, 7), nav))
+        summary.update(ge_error_metrics(np.asarray(ge_pairs, dtype=float).reshape(-1, 3)))
+        if timings:
+            us = np.asarray(timings) * 1e6
+            summary.update(
+                controller_us_p50=float(np.percentile(us, 50)),
+                controller_us_p99=float(np.percentile(us, 99)),
+            )
+            us = np.asarray(step_timings) * 1e6
+            summary.update(
+                estimator_controller_us_p50=float(np.percentile(us, 50)),
+                estimator_controller_us_p99=float(np.percentile(us, 99)),
+            )
         summary.update(
-            sim_s=sim_s,
-            wall_s=wall,
-            rtf=sim_s / wall if wall > 0 else 0.0,
-            steps=len(log),
-            trajectory_sha256=trajectory_sha256(log),
+            model=tuning.model.name,
+            malformed=link.malformed,
+            unknown=link.unknown,
+            gcs=gcs.counters.as_dict(),
+            mission_items=len(station.items),
+            touchdown_declared_s=cmd_state.touchdown_s,
+            failsafes=failsafes,
+            **online_summary,
         )
-    summary.update(estimator_metrics(np.asarray(nav_errors).reshape(-1, 7), nav))
-    summary.update(ge_error_metrics(np.asarray(ge_pairs, dtype=float).reshape(-1, 3)))
-    if timings:
-        us = np.asarray(timings) * 1e6
-        summary.update(
-            controller_us_p50=float(np.percentile(us, 50)),
-            controller_us_p99=float(np.percentile(us, 99)),
-        )
-        us = np.asarray(step_timings) * 1e6
-        summary.update(
-            estimator_controller_us_p50=float(np.percentile(us, 50)),
-            estimator_controller_us_p99=float(np.percentile(us, 99)),
-        )
-    summary.update(
-        model=tuning.model.name,
-        malformed=link.malformed,
-        unknown=link.unknown,
-        gcs=gcs.counters.as_dict(),
-        mission_items=len(station.items),
-        touchdown_declared_s=cmd_state.touchdown_s,
-        failsafes=failsafes,
-        **online_summary,
-    )
+    finally:
+        recorder.close(ended, summary)  # the summary in the file too (a no-op if closed)
     summary.update(recorder.stats())
     data = np.asarray(samples, dtype=float) if samples else None
     return Flight(log=log, summary=summary, ended=ended, samples=data)

@@ -78,7 +78,10 @@ def test_the_recording_holds_the_trajectory_the_autopilot_flew(flown):
     # what was flown, though a ground station uploaded the mission: file, network, learning
     meta = recording.meta
     assert meta["mission"].endswith("land_on_box.yaml") and meta["network"] is None
-    assert meta["online"] == "off"
+    assert meta["online"] == "off" and meta["groundfx_version"] and meta["parameters"]
+    # the flight's summary travels in the file too
+    written = json.loads(recording.static("summary", "TextDocument:text"))
+    assert written["landed"] and written["steps"] == summary["steps"]
     translation = recording.values("world/drone", "Transform3D:translation")  # 50 Hz, float32
     at = np.searchsorted(log[:, 0], recording.times("world/drone") - 1e-9)
     assert len(at) > summary["sim_s"] * 49

@@ -74,6 +74,7 @@ COUNTERS = ("received", "dropped", "rejected")  # MAVLink counters per link, cum
 MAVLINK = "plots/mavlink"  # one entity per link: plots/mavlink/<link> with COUNTERS
 EVENTS = "events"  # TextLog: modes, arming, failsafes, link events, the end of the flight
 META = "meta"  # static TextDocument: JSON with the flight's configuration and mode names
+SUMMARY = "summary"  # static TextDocument: JSON, the flight's summary (figures, how it ended)
 
 # What every recorder file holds (OBSTACLES only for worlds with obstacles; the counters of
 # each link under MAVLINK).

@@ -95,6 +95,21 @@ def _flight_log_writer(args: argparse.Namespace) -> Any:
     return FlightLogWriter(args.flight_log, {"mission": mission, "vehicle": args.vehicle})
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("groundfx")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _sha256(path: str | None) -> str | None:
+    import hashlib
+
+    return None if path is None else hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
 def cmd_autopilot(args: argparse.Namespace) -> int:
     import dataclasses
 
@@ -163,6 +178,11 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
     recording = record_path(args, params.model()[0])
     if recording is not None:
         model, rho = params.model()
+        network_file = None
+        if model == "neural":
+            from learner.model import resolve_model_path
+
+            network_file = str(resolve_model_path(args.network or default_network(rho)))
         info = {
             "mission": str(args.mission or args.record_mission or "uploaded by a ground station"),
             "model": model,
@@ -170,6 +190,11 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
             # the network a neural model flies (the packaged one for its rho unless named)
             "network": (args.network or default_network(rho)) if model == "neural" else None,
             "online": args.online or "off",
+            "groundfx_version": _version(),
+            # the network file flown and its content's hash (a model's version)
+            "network_file": network_file,
+            "network_sha256": _sha256(network_file),
+            "parameters": {k: float(v) for k, v in sorted(params.values.items())},
             "world": args.record_world,
             "sim": args.sim,
             "identity": args.identity,
