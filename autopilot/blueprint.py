@@ -13,6 +13,7 @@ learner's views appear only on flights that learn.
 from __future__ import annotations
 
 import rerun.blueprint as rrb
+import rerun.blueprint.components as rrbc
 
 from learner.flightlogs.recording import EVENTS, MAVLINK, TIMELINE, WORLD
 from simbridge.frames import Vec3
@@ -54,7 +55,17 @@ def default_blueprint(
         else []
     )
     status = rrb.Tabs(
-        rrb.TextLogView(origin=EVENTS, name="events"),
+        rrb.TextLogView(  # time, level and text: the entity path is always `events`
+            origin=EVENTS,
+            name="events",
+            columns=rrb.TextLogColumns(
+                text_log_columns=[
+                    rrbc.TextLogColumn("entitypath", visible=False),
+                    rrbc.TextLogColumn("loglevel"),
+                    rrbc.TextLogColumn("body"),
+                ]
+            ),
+        ),
         rrb.TimeSeriesView(origin="plots/mode", name="mode"),
         rrb.TimeSeriesView(origin=f"{MAVLINK}/sim", name="MAVLink: simulator link"),
         rrb.TimeSeriesView(origin=f"{MAVLINK}/gcs", name="MAVLink: ground stations"),
