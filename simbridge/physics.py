@@ -24,17 +24,15 @@ from simbridge.effects.uncatalogued import (
     outwash_force_n,
     thrust_decay_scale,
 )
-from simbridge.frames import Quat, Vec3, quat_from_euler, wxyz_to_xyzw, xyzw_to_wxyz
+from simbridge.frames import Quat, Vec3, xyzw_to_wxyz
 from simbridge.pybullet_quiet import pybullet as pb
+from simbridge.pybullet_world import WORLD_GROUP, build_body, build_surfaces, surface_footprints
 from simbridge.rotors import Quad, rotor_forces_n, thrust_and_moments
-from simbridge.surface_rays import VerticalRays, footprint
-from simbridge.vehicle import GRAVITY_M_S2, Vehicle
+from simbridge.surface_rays import VerticalRays
+from simbridge.vehicle import Vehicle
 from simbridge.world import World
 
-WORLD_GROUP = 1  # collision group of the ground and obstacles: what rays see
-VEHICLE_GROUP = 2
 NO_HIT = math.inf
-CEILING_SIZE_M = (1000.0, 1000.0)  # the ceiling slab's extent
 LEARNED_RAY_M = 3.0  # a learnt residual's height rays: beyond, its feature is capped anyway
 
 
@@ -84,7 +82,7 @@ class Simulation:
         self._dt = world.physics_dt_s
         self._time_us = 0
         self.held = held  # on a stand at the start pose until released (see HIL link)
-        self._build_world()
+        build_surfaces(self._cid, world, self._dt)
 
         # Effective physical constants of the simulated (true) vehicle.
         self._c_t = vehicle.thrust_coefficient_n_s2 * (
@@ -112,7 +110,9 @@ class Simulation:
         lengths = [e.ray_length_m for e in (self._ge, self._gex) if e is not None]
         self._down_m = max(lengths + ([LEARNED_RAY_M] if self._learned else []), default=None)
         self._lift_off_us: int | None = None  # see time_since_takeoff_s
-        self._build_vehicle()
+        body = build_body(self._cid, world, vehicle, self.true_mass_kg)
+        self._body, self.resting_height_m = body.body_id, body.resting_height_m
+        self.start_position_m, self.start_quaternion = body.position_m, body.quaternion
         self._vertical_rays = self._build_rays()
         self._horizontal_effects = (
             fx.wall_effect is not None
@@ -133,41 +133,6 @@ class Simulation:
 
     # -- construction -------------------------------------------------------------------
 
-    def _build_world(self) -> None:
-        cid, w = self._cid, self.world
-        pb.setGravity(0.0, 0.0, -GRAVITY_M_S2, physicsClientId=cid)
-        pb.setPhysicsEngineParameter(
-            fixedTimeStep=self._dt, deterministicOverlappingPairs=1, physicsClientId=cid
-        )
-        plane = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=cid)
-        self._surfaces = [pb.createMultiBody(0.0, plane, physicsClientId=cid)]
-        for box in w.obstacles:
-            half = [s / 2 for s in box.size_m]
-            shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=cid)
-            orn = wxyz_to_xyzw(quat_from_euler(0.0, 0.0, math.radians(box.yaw_deg)))
-            self._surfaces.append(
-                pb.createMultiBody(
-                    0.0, shape, basePosition=box.center_m, baseOrientation=orn, physicsClientId=cid
-                )
-            )
-        if w.ceiling_height_m is not None:
-            half = [CEILING_SIZE_M[0] / 2, CEILING_SIZE_M[1] / 2, 0.05]
-            slab = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=cid)
-            self._surfaces.append(
-                pb.createMultiBody(
-                    0.0,
-                    slab,
-                    basePosition=[0.0, 0.0, w.ceiling_height_m + 0.05],
-                    physicsClientId=cid,
-                )
-            )
-        for uid in self._surfaces:
-            # Surfaces accept every mask, so that rays (of the default group) see them.
-            pb.setCollisionFilterGroupMask(uid, -1, WORLD_GROUP, 0xFFFF, physicsClientId=cid)
-            pb.changeDynamics(
-                uid, -1, lateralFriction=w.ground_friction, restitution=0.0, physicsClientId=cid
-            )
-
     def _build_rays(self) -> VerticalRays | None:
         """Down rays from the hubs (rotor heights), up rays from them (the ceiling effect),
         a down ray from the centre (the outwash's height): one batch, cast when needed."""
@@ -184,50 +149,7 @@ class Simulation:
             reach.append(self._outwash.ray_length_m)
         if not signs:
             return None
-        w = self.world
-        prints = [footprint(b.center_m, b.size_m, math.radians(b.yaw_deg)) for b in w.obstacles]
-        if w.ceiling_height_m is not None:
-            prints.append(footprint((0.0, 0.0), CEILING_SIZE_M, 0.0))
-        return VerticalRays(self._cid, prints, signs, reach, WORLD_GROUP)
-
-    def _build_vehicle(self) -> None:
-        cid, v, start = self._cid, self.vehicle, self.world.start
-        half = [s / 2 for s in v.body_size_m]
-        shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=cid)
-        self._body = pb.createMultiBody(self.true_mass_kg, shape, physicsClientId=cid)
-        scale = self.true_mass_kg / v.mass_kg  # uniform density: inertia scales with mass
-        pb.changeDynamics(
-            self._body,
-            -1,
-            linearDamping=0.0,
-            angularDamping=0.0,
-            restitution=0.0,
-            lateralFriction=self.world.ground_friction,
-            localInertiaDiagonal=[i * scale for i in v.inertia_kg_m2],
-            physicsClientId=cid,
-        )
-        pb.setCollisionFilterGroupMask(
-            self._body, -1, VEHICLE_GROUP, WORLD_GROUP, physicsClientId=cid
-        )
-        x, y = start.xy_m
-        # the surface below the start point: the vehicle rests there unless started in the air
-        ceiling = self.world.ceiling_height_m
-        top = 1000.0 if ceiling is None else ceiling - 1e-3  # under a ceiling, not on it
-        hit = pb.rayTest(
-            [x, y, top], [x, y, -1.0], collisionFilterMask=WORLD_GROUP, physicsClientId=cid
-        )[0]
-        self.resting_height_m = (hit[3][2] if hit[0] >= 0 else 0.0) + half[2]
-        z = start.altitude_m if start.altitude_m is not None else self.resting_height_m
-        self.start_quaternion = quat_from_euler(
-            math.radians(start.roll_deg), math.radians(start.pitch_deg), math.radians(start.yaw_deg)
-        )
-        self.start_position_m: Vec3 = (x, y, z)
-        pb.resetBasePositionAndOrientation(
-            self._body,
-            self.start_position_m,
-            wxyz_to_xyzw(self.start_quaternion),
-            physicsClientId=cid,
-        )
+        return VerticalRays(self._cid, surface_footprints(self.world), signs, reach, WORLD_GROUP)
 
     # -- stepping -----------------------------------------------------------------------
 
