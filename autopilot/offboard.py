@@ -124,6 +124,14 @@ def _mask_checks(mask: int) -> None:
         raise Refused("setpoint refused: the type mask ignores position, velocity and acceleration")
 
 
+def _frame_and_mask_checks(frame: int, frames: dict[int, str], kind: str, mask: int) -> None:
+    """A frame this kind of target takes, and a mask that controls something."""
+    if frame not in frames:
+        taken = ", ".join(f"{k} {n}" for k, n in frames.items())
+        raise Refused(f"setpoint refused: frame {frame} ({kind} targets take {taken})")
+    _mask_checks(mask)
+
+
 def _yaws(mask: int, yaw: float, yaw_rate: float) -> tuple[float, float]:
     """NED heading (clockwise from north) and its rate -> ours (counter-clockwise from east)."""
     heading = math.nan if mask & IGNORE_YAW or not math.isfinite(yaw) else math.pi / 2 - yaw
@@ -140,12 +148,7 @@ def local_target(
 ) -> Target:
     """SET_POSITION_TARGET_LOCAL_NED as a target; `position_m` and `heading_rad` (ours) are the
     vehicle's, which the offset and body frames count from."""
-    if frame not in LOCAL_FRAMES:
-        raise Refused(
-            f"setpoint refused: frame {frame} (local targets take "
-            f"{', '.join(f'{k} {n}' for k, n in LOCAL_FRAMES.items())})"
-        )
-    _mask_checks(mask)
+    _frame_and_mask_checks(frame, LOCAL_FRAMES, "local", mask)
     p = _given(fields[0:3], mask, IGNORE_POSITION)
     v = _given(fields[3:6], mask, IGNORE_VELOCITY)
     a = _given(fields[6:9], mask, IGNORE_ACCELERATION)
@@ -199,12 +202,7 @@ def global_target(
     position_m: Vec3,
 ) -> Target:
     """SET_POSITION_TARGET_GLOBAL_INT as a target (velocities and accelerations NED)."""
-    if frame not in GLOBAL_FRAMES:
-        raise Refused(
-            f"setpoint refused: frame {frame} (global targets take "
-            f"{', '.join(f'{k} {n}' for k, n in GLOBAL_FRAMES.items())})"
-        )
-    _mask_checks(mask)
+    _frame_and_mask_checks(frame, GLOBAL_FRAMES, "global", mask)
     v = _given(fields[1:4], mask, IGNORE_VELOCITY)
     a = _given(fields[4:7], mask, IGNORE_ACCELERATION)
     _check("velocity", v, MAX_SPEED_M_S)

@@ -37,18 +37,18 @@ def _autopilot(sim: int | str, *options: str) -> list[str]:
     ]
 
 
-def autopilot_command(sim_port: int | str, mission_path: Path, *options: str) -> list[str]:
+def autopilot_command(sim: int | str, mission_path: Path, *options: str) -> list[str]:
     """The command line of an autopilot process flying `mission_path` against a local sim on
     its own, with no ground station (reproducible: arming and take-off at fixed sim times)."""
     return _autopilot(
-        sim_port, "--mission", str(mission_path), "--auto-start", "--no-gcs", *options
+        sim, "--mission", str(mission_path), "--auto-start", "--no-gcs", *options
     )
 
 
-def gcs_autopilot_command(sim_port: int | str, gcs_port: int, *options: str) -> list[str]:
+def gcs_autopilot_command(sim: int | str, gcs_port: int, *options: str) -> list[str]:
     """An autopilot process that waits for a ground station on udpout:127.0.0.1:`gcs_port`."""
     return _autopilot(
-        sim_port, "--out", f"udpout:127.0.0.1:{gcs_port}", "--exit-after-landing", *options
+        sim, "--out", f"udpout:127.0.0.1:{gcs_port}", "--exit-after-landing", *options
     )
 
 
@@ -104,7 +104,7 @@ def fly(
     # both ends are ours: a Unix-domain socket, and the two processes start side by side
     socket_dir = tempfile.TemporaryDirectory(prefix="groundfx-")
     socket_path = Path(socket_dir.name) / "sim.sock"
-    port = f"unix:{socket_path}"
+    sim_url = f"unix:{socket_path}"
     sim = spawn_local_sim(
         resolve_world_path(world),
         socket_path,
@@ -115,14 +115,14 @@ def fly(
     gcs: dict[str, Any] = {}
     try:
         if station is None:
-            cmd = autopilot_command(port, mission_path, *options)
+            cmd = autopilot_command(sim_url, mission_path, *options)
             autopilot = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
             out, err, code = autopilot.stdout, autopilot.stderr, autopilot.returncode
         else:
             gcs_port = station.conn.port.getsockname()[1]
             station.on_text = lambda text: say(f"vehicle: {text}")
             process = subprocess.Popen(
-                gcs_autopilot_command(port, gcs_port, *options),
+                gcs_autopilot_command(sim_url, gcs_port, *options),
                 stdout=subprocess.PIPE,
                 stderr=subprocess.PIPE,
                 text=True,

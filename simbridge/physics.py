@@ -227,8 +227,10 @@ class Simulation:
 
         # Rotor hubs relative to the centre of mass in the world frame, and where they are.
         px, py, pz = pos
-        offsets, hubs = [], []
-        for rx, ry, rz in self._rotors_body:
+        offsets: list[Vec3] = []
+        hubs: list[Vec3] = []
+        # only where rays measure rotor heights (the ground effects' torques use them too)
+        for rx, ry, rz in self._rotors_body if self._vertical_rays is not None else ():
             ox = m0 * rx + m1 * ry + m2 * rz
             oy = m3 * rx + m4 * ry + m5 * rz
             oz = m6 * rx + m7 * ry + m8 * rz

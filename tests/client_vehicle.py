@@ -27,6 +27,7 @@ from autopilot.mission_items import Home
 from mission.plans.formats import load_mission_file
 from simbridge.frames import geodetic_to_local
 from simbridge.launch import start_sim
+from simbridge.world import load_world
 from tests.helpers import REPO
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -41,6 +42,17 @@ SPEEDUP = "10"
 LANDING_ACCEPTANCE_M = 0.02  # NAV_ACC_RAD, set by each client: where the descent begins
 LANDED_WITHIN_M = 0.03
 FLIGHT_WALL_S = 60.0  # the square takes about 40 s simulated: 4 s wall at speedup 10
+# The 8 m squares of the first-hour tests: each corner's acceptance radius, the mission's own
+# speed (DO_CHANGE_SPEED, to keep it short: 55 s simulated), the speed-up they fly at
+SQUARE_ACCEPTANCE_M = 0.3
+SQUARE_SPEED_M_S = 1.0
+SQUARE_SPEEDUP = "20"
+
+
+def origin_home() -> Home:
+    """The default world's origin, where the vehicle starts: home."""
+    o = load_world("default").origin
+    return Home(o.lat_deg, o.lon_deg, o.alt_m)
 
 
 def free_udp_port() -> int:

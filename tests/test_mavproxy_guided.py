@@ -17,14 +17,17 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from autopilot.mission_items import DO_CHANGE_SPEED, NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT, Home
+from autopilot.mission_items import DO_CHANGE_SPEED, NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT
 from simbridge.frames import geodetic_to_local, local_to_geodetic
-from simbridge.world import load_world
 from tests.client_vehicle import (
     FLIGHT_WALL_S,
     IDENTITIES,
+    SQUARE_ACCEPTANCE_M,
+    SQUARE_SPEED_M_S,
+    SQUARE_SPEEDUP,
     closest_approach_m,
     free_udp_port,
+    origin_home,
     square_8m,
     vehicle,
 )
@@ -32,11 +35,10 @@ from tests.test_mavproxy import MavProxy
 
 __all__ = ["vehicle"]  # the fixture, used by name
 
-WORLD = load_world("default").origin
-HOME = Home(WORLD.lat_deg, WORLD.lon_deg, WORLD.alt_m)  # the vehicle starts at the origin
-ACCEPTANCE_M = 0.3
-SPEED_M_S = 1.0  # the mission's own (DO_CHANGE_SPEED), to keep it short: 55 s simulated
-FAST = "20"
+HOME = origin_home()  # the vehicle starts at the origin
+ACCEPTANCE_M = SQUARE_ACCEPTANCE_M  # MAVSDK's own default would be 1 m
+SPEED_M_S = SQUARE_SPEED_M_S
+FAST = SQUARE_SPEEDUP
 
 
 class Watcher:

@@ -18,12 +18,15 @@ from mavsdk.asyncio.plugins.telemetry import FlightMode
 
 from autopilot.mission_items import Home
 from simbridge.frames import geodetic_to_local, local_to_geodetic
-from simbridge.world import load_world
 from tests.client_vehicle import (
     FLIGHT_WALL_S,
     IDENTITIES,
+    SQUARE_ACCEPTANCE_M,
+    SQUARE_SPEED_M_S,
+    SQUARE_SPEEDUP,
     closest_approach_m,
     free_udp_port,
+    origin_home,
     square_8m,
     vehicle,
 )
@@ -41,12 +44,11 @@ from tests.test_mavsdk import (
 
 __all__ = ["vehicle"]  # the fixture, used by name
 
-WORLD = load_world("default").origin
-ORIGIN = Home(WORLD.lat_deg, WORLD.lon_deg, WORLD.alt_m)
-ACCEPTANCE_M = 0.3  # each corner's acceptance radius (MAVSDK's own default would be 1 m)
+ORIGIN = origin_home()  # the vehicle starts at the origin
+ACCEPTANCE_M = SQUARE_ACCEPTANCE_M  # MAVSDK's own default would be 1 m
 ALTITUDE_M = 1.0
-SPEED_M_S = 1.0  # the mission's own (DO_CHANGE_SPEED), to keep it short: 55 s simulated
-FAST = "20"
+SPEED_M_S = SQUARE_SPEED_M_S
+FAST = SQUARE_SPEEDUP
 
 
 async def home_of(client: Client) -> Home:
