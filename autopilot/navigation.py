@@ -94,8 +94,9 @@ class Navigation:
         self._rest_z_m: float | None = None  # the height it stands at
         self._home_terrain_m = 0.0  # the surface's height where the vehicle last stood
         self.height_source = HEIGHT_NAMES[params.hgt_ref]
-        self.range_m: float | None = None
         self.events: list[str] = []
+        self._imu: Imu | None = None  # the sample `predict` took, for `correct`
+        self._aligned_now = False  # `predict` aligned the filter: nothing to correct yet
 
     # -- what the rest of the autopilot reads ---------------------------------------------
 
@@ -144,13 +145,18 @@ class Navigation:
 
     # -- one control step ------------------------------------------------------------------
 
-    def update(self, step: Step) -> None:
+    def predict(self, step: Step) -> None:
+        """The state brought to this tick by its IMU sample: all the control path waits for.
+        The measurements of the tick correct it in `correct`, after the reply (PX4's EKF2
+        fuses behind an output predictor the same way), so they act one tick later."""
         self.quality.this_step.clear()
         imu = imu_from(step)
-        t = imu.time_us * 1e-6
+        self._imu = imu
         if self.estimate is None:
             self._initialise(step, imu)
+            self._aligned_now = self.estimate is not None
             return
+        self._aligned_now = False
         before = self.estimate
         self.estimate = ekf.predict_state(before, imu.time_us, imu.specific_force, imu.rates)
         dt = (self.estimate.time_us - before.time_us) * 1e-6
@@ -159,20 +165,26 @@ class Navigation:
         self._pending_dt += dt
         self._pending_f += imu.specific_force * dt
         self._pending_w += imu.rates * dt
-        if self._pending_dt >= COVARIANCE_PERIOD_S:
-            self._sync()
         self._moved = self._moved + (self.estimate.position_m - before.position_m)
         turn = ekf.rotation_vector_quat(self.estimate.angular_velocity_body_rad_s * dt)
         turned = ekf.quat_mul(self._turned, turn)
         self._turned = turned / np.linalg.norm(turned)
         self._record(imu.time_us)
+
+    def correct(self, step: Step) -> None:
+        """The covariance and the fusions of the tick `predict` took: off the control path."""
+        imu = self._imu
+        if self.estimate is None or imu is None or self._aligned_now:
+            return
+        if self._pending_dt >= COVARIANCE_PERIOD_S:
+            self._sync()
+        t = imu.time_us * 1e-6
         p = self.params
         if p.ev_ctrl and "ODOMETRY" in step.new:
             self._fuse_mocap(step.latest["ODOMETRY"], t)
         if p.gps_ctrl and "HIL_GPS" in step.new:
             self._fuse_gps(step.latest["HIL_GPS"], t)
         range_m = range_reading(step)
-        self.range_m = range_m
         if range_m is not None:
             self._last_seen["range"] = t
         if (

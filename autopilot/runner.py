@@ -144,7 +144,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     tuning = Tuning(config)
     rows: list[tuple[float, ...]] = []
     timings: list[float] = []  # controller and ground-effect model, per step
-    step_timings: list[float] = []  # the same with the estimator's update before it
+    step_timings: list[float] = []  # the same with the estimator's prediction before it
+    correction_timings: list[float] = []  # the estimator's fusions, after the reply
     ge_pairs: list[tuple[float, float, float]] = []  # (height, predicted, true) vertical GE
     speeds = (0.0, 0.0, 0.0, 0.0)
     ge = (0.0, 0.0, 0.0)
@@ -204,7 +205,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             t_us = step.sensor["time_usec"]
             t = t_us * 1e-6
             t_nav = time.perf_counter()
-            nav.update(step)
+            nav.predict(step)
             nav_s = time.perf_counter() - t_nav
             if not nav.ready:  # aligning: the first pose or fix has not come yet
                 link.send(t_us, (0.0, 0.0, 0.0, 0.0), channels, False)
@@ -330,6 +331,9 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             last_t = t
             link.send(t_us, tuple(n / n_max for n in speeds), channels, cmd.armed)
             # off the control path from here: the simulator steps meanwhile
+            t_nav = time.perf_counter()
+            nav.correct(step)
+            correction_timings.append(time.perf_counter() - t_nav)
             actual = true_state(step, config.origin) or state
             true_height = true_height_m(step, actual, nav.terrain_m)
             # the flight log's rows: in the air by the truth, as the recording's reader judges
@@ -423,6 +427,12 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             summary.update(
                 estimator_controller_us_p50=float(np.percentile(us, 50)),
                 estimator_controller_us_p99=float(np.percentile(us, 99)),
+            )
+        if correction_timings:
+            us = np.asarray(correction_timings) * 1e6
+            summary.update(
+                estimator_correction_us_p50=float(np.percentile(us, 50)),
+                estimator_correction_us_p99=float(np.percentile(us, 99)),
             )
         summary.update(
             model=tuning.model.name,
