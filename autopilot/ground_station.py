@@ -69,8 +69,7 @@ class GroundStation:
 
     def before_step(self, cmd: CommanderState, inp: StepInput) -> CommanderState:
         """Apply what the ground stations asked since the last step; check the failsafes."""
-        if self.initial_home_m is None:
-            self.initial_home_m = inp.state.position_m
+        self._first_position(inp)
         hold_mode = FlightMode.GUIDED if self.identity == "ardupilot" else FlightMode.HOLD
         if cmd.hold_mode != hold_mode:  # ArduCopter holds in Guided after a guided take-off
             cmd = requests.dataclasses.replace(cmd, hold_mode=hold_mode)
@@ -89,6 +88,7 @@ class GroundStation:
         self, cmd: CommanderState, inp: StepInput, reached: tuple[int, ...], events: tuple[str, ...]
     ) -> None:
         """Report what the step did, and the telemetry that is due."""
+        self._first_position(inp)
         for index in reached:
             self.on_event(inp.time_s, f"mission item {cmd.plan[index].seq} reached")
             self.send(mav.MAVLink_mission_item_reached_message(cmd.plan[index].seq), inp)
@@ -112,6 +112,11 @@ class GroundStation:
             and inp.wall_s - self.signing_saved_wall_s > SIGNING_SAVE_S
         ):
             self.save_signing(inp.wall_s)
+
+    def _first_position(self, inp: StepInput) -> None:
+        """Home until one is set: where the vehicle was at the first step."""
+        if self.initial_home_m is None:
+            self.initial_home_m = inp.state.position_m
 
     def save_signing(self, wall_s: float) -> None:
         if self.link.signing is not None:

@@ -96,6 +96,8 @@ class Navigation:
         self.height_source = HEIGHT_NAMES[params.hgt_ref]
         self.events: list[str] = []
         self._imu: Imu | None = None  # the sample `predict` took, for `correct`
+        self._before: ekf.Estimate | None = None  # the estimate `predict` started from
+        self._predicted: ekf.Estimate | None = None  # ... and the one it made
         self._aligned_now = False  # `predict` aligned the filter: nothing to correct yet
 
     # -- what the rest of the autopilot reads ---------------------------------------------
@@ -157,27 +159,30 @@ class Navigation:
             self._aligned_now = self.estimate is not None
             return
         self._aligned_now = False
-        before = self.estimate
-        self.estimate = ekf.predict_state(before, imu.time_us, imu.specific_force, imu.rates)
-        dt = (self.estimate.time_us - before.time_us) * 1e-6
+        self._before = self.estimate
+        self.estimate = ekf.predict_state(self._before, imu.time_us, imu.specific_force, imu.rates)
+        self._predicted = self.estimate
+
+    def correct(self, step: Step) -> None:
+        """The covariance and the fusions of the tick `predict` took: off the control path."""
+        imu = self._imu
+        before, predicted = self._before, self._predicted
+        if before is None or predicted is None or imu is None or self._aligned_now:
+            return
+        dt = (predicted.time_us - before.time_us) * 1e-6
         self._steps += 1
         # the covariance follows at COVARIANCE_PERIOD_S from the IMU's mean over the interval
         self._pending_dt += dt
         self._pending_f += imu.specific_force * dt
         self._pending_w += imu.rates * dt
-        self._moved = self._moved + (self.estimate.position_m - before.position_m)
-        turn = ekf.rotation_vector_quat(self.estimate.angular_velocity_body_rad_s * dt)
+        if self._pending_dt >= COVARIANCE_PERIOD_S:
+            self._sync()
+        # what the prediction moved and turned, for measurements captured in the past
+        self._moved = self._moved + (predicted.position_m - before.position_m)
+        turn = ekf.rotation_vector_quat(predicted.angular_velocity_body_rad_s * dt)
         turned = ekf.quat_mul(self._turned, turn)
         self._turned = turned / np.linalg.norm(turned)
         self._record(imu.time_us)
-
-    def correct(self, step: Step) -> None:
-        """The covariance and the fusions of the tick `predict` took: off the control path."""
-        imu = self._imu
-        if self.estimate is None or imu is None or self._aligned_now:
-            return
-        if self._pending_dt >= COVARIANCE_PERIOD_S:
-            self._sync()
         t = imu.time_us * 1e-6
         p = self.params
         if p.ev_ctrl and "ODOMETRY" in step.new:

@@ -218,7 +218,6 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             inp = StepInput(t, wall, state, height, resting_height, nav.position_lost(t))
             if not rows and config.mission:
                 cmd_state = station.load_mission(cmd_state, config.mission)
-            cmd_state = station.before_step(cmd_state, inp)
             if (
                 config.auto_start
                 and cmd_state.phase == Phase.DISARMED
@@ -379,6 +378,9 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                     MODES.index(cmd_state.phase),
                 )
             )
+            # what the ground stations asked since, and the failsafes: for the next step (a
+            # real autopilot's commander runs beside its control loop, not in it)
+            cmd_state = station.before_step(cmd_state, inp)
             if (
                 config.exit_after_landing
                 and cmd_state.phase == Phase.LANDED
