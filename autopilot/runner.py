@@ -264,30 +264,6 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             cmd_state = cmd.state
             airborne = height > resting_height + AIRBORNE_MARGIN_M
             applied = speeds  # the rotor speeds of the interval that ended at t
-            sample_hz = config.record_hz or online.sample_hz
-            if (
-                sample_hz > 0.0
-                and t >= next_sample_s
-                and airborne
-                and cmd_state.phase in RECORDED_PHASES
-            ):
-                row = learning_sample(
-                    t, step, state, height, applied, vehicle, nav.accel_bias_m_s2()
-                )
-                online.submit(row)
-                if config.record_hz > 0.0:
-                    samples.append(row)
-                period = 1.0 / sample_hz  # on a 100 Hz schedule, 250 Hz steps
-                next_sample_s = next_sample_s + period if t - next_sample_s < period else t + period
-                if config.on_sample is not None:
-                    config.on_sample(len(samples))
-                if (
-                    config.record_hz > 0.0
-                    and config.stop_after_samples is not None
-                    and len(samples) >= config.stop_after_samples
-                ):
-                    ended = "enough samples"
-                    break
             if cmd.setpoint is not None:
                 t0 = time.perf_counter()
                 online.apply(tuning.model)
@@ -321,9 +297,6 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 last_setpoint_z = cmd.setpoint.position_m[2]
                 timings.append(time.perf_counter() - t0)
                 step_timings.append(timings[-1] + nav_s)
-                truth = step.latest.get("DEBUG_VECT")
-                if airborne and truth is not None:
-                    ge_pairs.append((height, target[2], truth["z"]))
             else:
                 speeds, ge, output = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), None
                 integral = (0.0, 0.0, 0.0)  # rotors off: the next flight starts afresh
@@ -333,6 +306,34 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             t_nav = time.perf_counter()
             nav.correct(step)
             correction_timings.append(time.perf_counter() - t_nav)
+            link.receive_truth(step)  # where it follows the tick (our simulator's transport)
+            truth = step.latest.get("DEBUG_VECT")
+            if cmd.setpoint is not None and airborne and truth is not None:
+                ge_pairs.append((height, target[2], truth["z"]))
+            sample_hz = config.record_hz or online.sample_hz
+            if (
+                sample_hz > 0.0
+                and t >= next_sample_s
+                and airborne
+                and cmd_state.phase in RECORDED_PHASES
+            ):
+                row = learning_sample(
+                    t, step, state, height, applied, vehicle, nav.accel_bias_m_s2()
+                )
+                online.submit(row)
+                if config.record_hz > 0.0:
+                    samples.append(row)
+                period = 1.0 / sample_hz  # on a 100 Hz schedule, 250 Hz steps
+                next_sample_s = next_sample_s + period if t - next_sample_s < period else t + period
+                if config.on_sample is not None:
+                    config.on_sample(len(samples))
+                if (
+                    config.record_hz > 0.0
+                    and config.stop_after_samples is not None
+                    and len(samples) >= config.stop_after_samples
+                ):
+                    ended = "enough samples"
+                    break
             actual = true_state(step, config.origin) or state
             true_height = true_height_m(step, actual, nav.terrain_m)
             # the flight log's rows: in the air by the truth, as the recording's reader judges

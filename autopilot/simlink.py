@@ -16,7 +16,6 @@ stale. In lockstep there is never more than one tick waiting.
 
 from __future__ import annotations
 
-import socket
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -70,6 +69,8 @@ class SimLink:
         )
         self._controls = [0.0] * 16
         self.received = 0  # messages decoded
+        # our own simulator, on the Unix-domain transport, sends each tick's truth after it
+        self.truth_follows = url.startswith("unix:")
 
     @property
     def malformed(self) -> int:
@@ -93,38 +94,65 @@ class SimLink:
                 new.add(kind)
                 if kind == "HIL_SENSOR":
                     return Step(fields, self._latest, new)
-            try:
-                data = self._sock.recv(65536)  # blocking, bounded by SO_RCVTIMEO
-            except (BlockingIOError, TimeoutError):
-                raise LinkLost(
-                    f"lost the simulator link: no data for {self._wait_s():g} s"
-                ) from None
-            except OSError as err:
-                raise LinkLost(
-                    f"lost the simulator link: {(err.strerror or str(err)).lower()}"
-                ) from None
-            if not data:
-                raise LinkLost("lost the simulator link: it closed the connection")
-            if not self.received:
-                transport.set_recv_timeout(self._sock, self._timeout_s)
-            frames = self._reader.feed(data)
-            self.received += len(frames)
-            self._queue.extend(frames)
+            self._read()
+
+    def receive_truth(self, step: Step) -> None:
+        """Where the truth follows the tick: read on to the HIL_STATE_QUATERNION of `step`'s
+        tick (its end), so that `step` holds that tick's truth. Called after the reply, off
+        the control path; a no-op where the truth comes before the tick."""
+        if not self.truth_follows:
+            return
+        time_us = step.sensor["time_usec"]
+        while True:
+            while self._queue:
+                kind, fields = self._queue[0]
+                if kind == "HIL_SENSOR":
+                    return  # the next tick: no truth came for this one
+                self._queue.pop(0)
+                self._latest[kind] = fields
+                step.new.add(kind)
+                if kind == "HIL_STATE_QUATERNION" and fields["time_usec"] >= time_us:
+                    return
+            self._read()
+
+    def _read(self) -> None:
+        """One blocking read into the queue of decoded frames."""
+        try:
+            data = self._sock.recv(65536)  # blocking, bounded by SO_RCVTIMEO
+        except (BlockingIOError, TimeoutError):
+            raise LinkLost(
+                f"lost the simulator link: no data for {self._wait_s():g} s"
+            ) from None
+        except OSError as err:
+            raise LinkLost(
+                f"lost the simulator link: {(err.strerror or str(err)).lower()}"
+            ) from None
+        if not data:
+            raise LinkLost("lost the simulator link: it closed the connection")
+        if not self.received:
+            transport.set_recv_timeout(self._sock, self._timeout_s)
+        self._queue_frames(data)
+
+    def _queue_frames(self, data: bytes) -> None:
+        frames = self._reader.feed(data)
+        self.received += len(frames)
+        self._queue.extend(frames)
 
     def _wait_s(self) -> float:
         return self._timeout_s if self.received else self._first_timeout_s
 
     def behind(self) -> bool:
-        """Whether another tick is already waiting (received, or in the socket): the autopilot
-        is working through a backlog. A peek, for the moments before arming only."""
-        if any(kind == "HIL_SENSOR" for kind, _ in self._queue):
-            return True
+        """Whether another tick is already waiting: the autopilot is working through a
+        backlog. What has arrived is read (without blocking) and looked through for a
+        HIL_SENSOR; for the moments before arming only."""
         try:
-            return bool(self._sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT))
-        except (BlockingIOError, InterruptedError):
-            return False
+            while (data := transport.recv_now(self._sock)) is not None:
+                if not data:
+                    break  # closed: the next receive reports it
+                self._queue_frames(data)
         except OSError:
-            return False  # the next receive reports it
+            pass  # the next receive reports it
+        return any(kind == "HIL_SENSOR" for kind, _ in self._queue)
 
     def send(
         self,

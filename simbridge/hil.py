@@ -147,29 +147,38 @@ class HilEncoder:
         return k > 0 and self._steps % k == 0
 
     def encode(self, state: VehicleState, time_us: int, truth: EffectForces | None = None) -> bytes:
-        """All messages of one control step at `time_us`, as one buffer for one send.
+        """All messages of one control step at `time_us`, as one buffer for one send: the
+        truth first, HIL_SENSOR last (the PX4 order, for any autopilot).
 
         `truth`, the simulator's true effect forces, travels as DEBUG_VECT "GE_TRUE" (the
         world-frame ground-effect force, N): for evaluation and recordings, never control.
         """
+        self._advance(state)
+        return self._truth_bytes(time_us, truth) + self._tick_bytes(time_us)
+
+    def tick(self, state: VehicleState, time_us: int) -> bytes:
+        """The sensors of one control step, HIL_SENSOR last, without the truth: where both
+        ends are ours, the truth follows the tick (`truth`), encoded and read while the other
+        side computes, off the lockstep's path."""
+        self._advance(state)
+        return self._tick_bytes(time_us)
+
+    def truth(self, time_us: int, forces: EffectForces | None = None) -> bytes:
+        """The truth of the step `tick` encoded, HIL_STATE_QUATERNION last (the end of it)."""
+        return self._truth_bytes(time_us, forces)
+
+    def _advance(self, state: VehicleState) -> None:
         self._history.append(state)
         hist = self._history
-        imu = hist[max(0, len(hist) - 1 - self._imu_delay)]
-        nav = hist[max(0, len(hist) - 1 - self._state_delay)]
-        parts = [self._hil_state(nav, time_us)]
-        until_s = self.world.sensors.odometry_until_s
-        if self._due("odometry") and (until_s is None or time_us < until_s * 1e6):
-            mocap = hist[max(0, len(hist) - 1 - self._mocap_delay)]
-            parts.append(self._odometry(mocap, time_us))
-        if self._due("distance"):
-            range_m = self._errors.range_m(nav.range_m)
-            parts.append(self._distance(range_m, time_us))
-            parts.append(self._flow(nav, range_m, time_us))
-        if self._due("esc"):
-            parts.append(self._esc(state))
-        if self._due("gps"):
-            parts.append(self._gps(nav, time_us))
-        if truth is not None and self._due("truth"):
+        self._imu_state = hist[max(0, len(hist) - 1 - self._imu_delay)]
+        self._nav_state = hist[max(0, len(hist) - 1 - self._state_delay)]
+        self._mocap_state = hist[max(0, len(hist) - 1 - self._mocap_delay)]
+        self._truth_due = self._due("truth")
+
+    def _truth_bytes(self, time_us: int, truth: EffectForces | None) -> bytes:
+        nav = self._nav_state
+        parts = []
+        if truth is not None and self._truth_due:
             ge = truth.ground_effect_n
             parts.append(self._pack_debug.pack(TRUTH_NAME, time_us, ge[0], ge[1], ge[2]))
             # the true position and velocity in floats (HIL_STATE_QUATERNION's degE7 resolve
@@ -185,9 +194,26 @@ class HilEncoder:
                 time_us, nav.position_m[2], nav.position_m[2] + self.world.origin.alt_m,
                 nav.position_m[2], nav.position_m[2], -1000.0, clearance,
             ))  # fmt: skip
+        parts.append(self._hil_state(nav, time_us))
+        return b"".join(parts)
+
+    def _tick_bytes(self, time_us: int) -> bytes:
+        nav = self._nav_state
+        parts = []
+        until_s = self.world.sensors.odometry_until_s
+        if self._due("odometry") and (until_s is None or time_us < until_s * 1e6):
+            parts.append(self._odometry(self._mocap_state, time_us))
+        if self._due("distance"):
+            range_m = self._errors.range_m(nav.range_m)
+            parts.append(self._distance(range_m, time_us))
+            parts.append(self._flow(nav, range_m, time_us))
+        if self._due("esc"):
+            parts.append(self._esc(self._history[-1]))  # the rotors now: no delay line
+        if self._due("gps"):
+            parts.append(self._gps(nav, time_us))
         # HIL_SENSOR last: it is the tick a lockstep autopilot answers, so everything of this
         # step has arrived when it does.
-        parts.append(self._hil_sensor(imu, time_us))
+        parts.append(self._hil_sensor(self._imu_state, time_us))
         self._steps += 1
         return b"".join(parts)
 

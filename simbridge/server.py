@@ -133,7 +133,7 @@ class SimServer:
         period = world.control_period_s
         wall0 = pace0 = time.perf_counter()
         try:
-            self._send(conn, encoder.encode(sim.state(), sim.time_us))
+            self._send_step(conn, encoder, sim, with_forces=False)
             while True:
                 if command is None:  # before the first actuators: real-time pace, no waiting
                     if options.lockstep_start:
@@ -154,9 +154,24 @@ class SimServer:
                     lag = pace0 + sim.time_s / options.speedup - time.perf_counter()
                     if lag > 0.0:
                         time.sleep(lag)
-                self._send(conn, encoder.encode(sim.state(), sim.time_us, sim.effect_forces()))
+                self._send_step(conn, encoder, sim, with_forces=True)
         finally:
             self.wall_s = time.perf_counter() - wall0
+
+    def _send_step(
+        self, conn: socket.socket, encoder: HilEncoder, sim: Simulation, *, with_forces: bool
+    ) -> None:
+        """One step's messages. To our own autopilot (the Unix-domain transport) the truth
+        follows the tick in a second send, encoded while the autopilot computes its reply;
+        to any other, in the PX4 order before it."""
+        state, time_us = sim.state(), sim.time_us
+        if self.options.unix_path is None:
+            forces = sim.effect_forces() if with_forces else None
+            self._send(conn, encoder.encode(state, time_us, forces))
+            return
+        self._send(conn, encoder.tick(state, time_us))
+        forces = sim.effect_forces() if with_forces else None
+        self._send(conn, encoder.truth(time_us, forces))
 
     def _send(self, conn: socket.socket, data: bytes) -> None:
         try:
