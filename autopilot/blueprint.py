@@ -15,7 +15,7 @@ from __future__ import annotations
 import rerun.blueprint as rrb
 import rerun.blueprint.components as rrbc
 
-from learner.flightlogs.recording import EVENTS, MAVLINK, TIMELINE, WORLD
+from learner.flightlogs.recording import EVENTS, MAVLINK, STATES, TIMELINE, WORLD
 from simbridge.frames import Vec3
 
 EYE_OFFSET_M = (-1.3, -1.3, 2.2)  # where the 3-D camera stands, from the point it looks at
@@ -66,7 +66,7 @@ def default_blueprint(
                 ]
             ),
         ),
-        rrb.TimeSeriesView(origin="plots/mode", name="mode"),
+        rrb.StateTimelineView(origin=STATES, name="flight mode and phase"),
         rrb.TimeSeriesView(origin=f"{MAVLINK}/sim", name="MAVLink: simulator link"),
         rrb.TimeSeriesView(origin=f"{MAVLINK}/gcs", name="MAVLink: ground stations"),
         *learner,

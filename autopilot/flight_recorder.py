@@ -35,12 +35,14 @@ from learner.flightlogs.recording import (
     APPLICATION_ID,
     COUNTERS,
     EVENTS,
+    FLIGHT_MODE_STATE,
     GE_ARROW_M_PER_N,
     GE_PREDICTED_ARROW,
     GE_TRUE_ARROW,
     LAYOUT_VERSION,
     MAVLINK,
     META,
+    PHASE_STATE,
     SERIES,
     SUMMARY,
     TIMELINE,
@@ -99,6 +101,7 @@ class FlightRecorder:
         self._flush_deadline = -math.inf
         self._last_t = 0.0
         self._mode: str | None = None
+        self._flight_mode = ""
         self._mode_index = -1.0
         self._armed = False
         self._started = False
@@ -125,13 +128,20 @@ class FlightRecorder:
         ge_n: Vec3,
         speeds_rad_s: Quad,
         output: ControlOutput | None,
+        flight_mode: str = "",
     ) -> None:
-        """One control step: what the autopilot saw, decided and sent, and the truth."""
+        """One control step: what the autopilot saw, decided and sent, and the truth. `mode`
+        is the flight's phase; `flight_mode` the mode a ground station sets (hold, mission,
+        ...). Both are named states in the recording (`states/`) as they change."""
         t0 = time.perf_counter()
         if not self._started:
             self._start(t_s, state.position_m)
         if mode != self._mode:
             self._mode_changed(t_s, mode)
+            self._state_changed(t_s, PHASE_STATE, mode)
+        if flight_mode != self._flight_mode:
+            self._flight_mode = flight_mode
+            self._state_changed(t_s, FLIGHT_MODE_STATE, flight_mode)
         if armed != self._armed:
             self._armed = armed
             self._events.append((t_s, "INFO", "armed" if armed else "disarmed"))
@@ -331,6 +341,10 @@ class FlightRecorder:
         if points:
             blueprint = default_blueprint(path[-1], z_range_m(path), self._learning)
             self._rec.send_blueprint(blueprint, make_active=False)
+
+    def _state_changed(self, t_s: float, path: str, state: str) -> None:
+        self._rec.set_time(TIMELINE, duration=np.timedelta64(round(t_s * 1e9), "ns"))
+        self._rec.log(path, rr.StateChange(state=state))
 
     def _mode_changed(self, t_s: float, mode: str) -> None:
         if mode not in self._modes:  # a mode the caller did not announce: name it in the meta

@@ -44,6 +44,7 @@ class Recorder(Protocol):
         ge_n: Vec3,
         speeds_rad_s: Quad,
         output: ControlOutput | None,
+        flight_mode: str = "",
     ) -> None: ...
     def event(self, text: str, level: str = "INFO", t_s: float | None = None) -> None: ...
     def learner(
@@ -63,7 +64,7 @@ class Recorder(Protocol):
 class NullRecorder:
     """Recording off."""
 
-    def step(self, *args: object) -> None:
+    def step(self, *args: object, **kwargs: object) -> None:
         pass
 
     def event(self, text: str, level: str = "INFO", t_s: float | None = None) -> None:

@@ -359,6 +359,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 ge,
                 speeds,
                 output,
+                flight_mode=cmd_state.mode.value,
             )
             for text in nav.events:  # after the step: the recording opens with the mode
                 on_event(t, text)

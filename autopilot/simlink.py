@@ -120,9 +120,7 @@ class SimLink:
         try:
             data = self._sock.recv(65536)  # blocking, bounded by SO_RCVTIMEO
         except (BlockingIOError, TimeoutError):
-            raise LinkLost(
-                f"lost the simulator link: no data for {self._wait_s():g} s"
-            ) from None
+            raise LinkLost(f"lost the simulator link: no data for {self._wait_s():g} s") from None
         except OSError as err:
             raise LinkLost(
                 f"lost the simulator link: {(err.strerror or str(err)).lower()}"

@@ -90,6 +90,7 @@ class Simulation:
         )
         self.true_mass_kg = vehicle.mass_kg * (fx.mass_error.scale if fx.mass_error else 1.0)
         self._rotors_body = vehicle.rotor_positions_body_m()
+        self._span = max(math.dist(r, (0.0, 0.0, 0.0)) for r in self._rotors_body)
         self._arm, self._kz = vehicle.arm_m, vehicle.yaw_moment_coefficient_m
         self._radius = vehicle.rotor_radius_m
         self._ge = fx.ground_effect
@@ -225,18 +226,7 @@ class Simulation:
             self._lift_off_us = self._time_us
         m0, m1, m2, m3, m4, m5, m6, m7, m8 = m
 
-        # Rotor hubs relative to the centre of mass in the world frame, and where they are.
-        px, py, pz = pos
-        offsets: list[Vec3] = []
-        hubs: list[Vec3] = []
-        # only where rays measure rotor heights (the ground effects' torques use them too)
-        for rx, ry, rz in self._rotors_body if self._vertical_rays is not None else ():
-            ox = m0 * rx + m1 * ry + m2 * rz
-            oy = m3 * rx + m4 * ry + m5 * rz
-            oz = m6 * rx + m7 * ry + m8 * rz
-            offsets.append((ox, oy, oz))
-            hubs.append((px + ox, py + oy, pz + oz))
-        heights, ceilings, walls, below = self._ray_tests(pos, hubs)
+        heights, ceilings, walls, below = self._ray_tests(pos, m)
 
         # Equation 3.6 in the body frame, ceiling effect as extra thrust on each rotor.
         if self._ce is not None:
@@ -268,9 +258,11 @@ class Simulation:
             g = ground_effect_forces_n(
                 f, heights, ge.rho, self._radius, self._ge_cutoff, ge.ray_length_m
             )
-            (o0, o1, o2, o3) = offsets
-            tx += o0[1] * g[0] + o1[1] * g[1] + o2[1] * g[2] + o3[1] * g[3]
-            ty -= o0[0] * g[0] + o1[0] * g[1] + o2[0] * g[2] + o3[0] * g[3]
+            # the torque of vertical forces g_i at the hubs R r_i: (R s)_y, -(R s)_x with
+            # s = sum g_i r_i in the body frame
+            sx, sy, sz = self._hub_moment(g)
+            tx += m3 * sx + m4 * sy + m5 * sz
+            ty -= m0 * sx + m1 * sy + m2 * sz
             total = g[0] + g[1] + g[2] + g[3]
             force[2] += total
             self._ge_rotor = g
@@ -281,13 +273,14 @@ class Simulation:
                 self._gex.decay_radii * self._radius,
                 self._gex.ray_length_m,
             )
-            total = 0.0
-            for i in range(4):
-                h = heights[i]
-                g_i = f[i] * exponential_gain(h, gain, decay) if h <= reach else 0.0
-                total += g_i
-                tx += offsets[i][1] * g_i
-                ty -= offsets[i][0] * g_i
+            g = [
+                fi * exponential_gain(h, gain, decay) if h <= reach else 0.0
+                for fi, h in zip(f, heights, strict=True)
+            ]
+            sx, sy, sz = self._hub_moment(g)
+            tx += m3 * sx + m4 * sy + m5 * sz
+            ty -= m0 * sx + m1 * sy + m2 * sz
+            total = g[0] + g[1] + g[2] + g[3]
             force[2] += total
             self._gex_force[2] = total
         self._heights = heights
@@ -372,8 +365,31 @@ class Simulation:
         force[2] += lf[2]
         self._learned_force[:] = lf
 
+    def _hubs(self, pos: tuple[float, ...], m: tuple[float, ...]) -> list[Vec3]:
+        """Where the rotor hubs are, in the world."""
+        px, py, pz = pos
+        m0, m1, m2, m3, m4, m5, m6, m7, m8 = m
+        return [
+            (
+                px + m0 * rx + m1 * ry + m2 * rz,
+                py + m3 * rx + m4 * ry + m5 * rz,
+                pz + m6 * rx + m7 * ry + m8 * rz,
+            )
+            for rx, ry, rz in self._rotors_body
+        ]
+
+    def _hub_moment(self, g: list[float]) -> Vec3:
+        """sum g_i r_i over the rotors' body positions r_i."""
+        (r0, r1, r2, r3) = self._rotors_body
+        g0, g1, g2, g3 = g
+        return (
+            g0 * r0[0] + g1 * r1[0] + g2 * r2[0] + g3 * r3[0],
+            g0 * r0[1] + g1 * r1[1] + g2 * r2[1] + g3 * r3[1],
+            g0 * r0[2] + g1 * r1[2] + g2 * r2[2] + g3 * r3[2],
+        )
+
     def _ray_tests(
-        self, pos: tuple[float, ...], hubs: list[Vec3]
+        self, pos: tuple[float, ...], m: tuple[float, ...]
     ) -> tuple[list[float], list[float], tuple[float, ...], float]:
         """Rotor heights, ceiling distances, wall distances and the centre's height: the
         vertical ones from `VerticalRays` (cast only when they can have changed), the walls'
@@ -381,10 +397,17 @@ class Simulation:
         heights = ceilings = [NO_HIT] * 4
         below = NO_HIT
         rays = self._vertical_rays
-        if self._hub_rays_only:  # the usual case: rotor heights alone
-            heights = rays.distances(hubs)
+        if rays is not None and self._hub_rays_only:  # the usual case: rotor heights alone
+            _, _, _, _, _, _, m6, m7, m8 = m
+            pz = pos[2]
+            zs = [pz + m6 * rx + m7 * ry + m8 * rz for rx, ry, rz in self._rotors_body]
+            known = rays.distances_about(pos, zs)
+            heights = (
+                known if known is not None else rays.distances(self._hubs(pos, m), pos, self._span)
+            )
         elif rays is not None:
             px, py, pz = pos
+            hubs = self._hubs(pos, m)
             points = []
             if self._down_m is not None:
                 points += hubs

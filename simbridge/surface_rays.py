@@ -75,9 +75,39 @@ class VerticalRays:
         self._levels: list[float] = []
         self._lengths = tuple(r + SLACK_M for r in self._reach)
         self._safe2: list[float] = []  # squared safe radius of each point
+        # where the points' rigid body had its centre at the last cast, and how far that may
+        # move with every point still inside its safe radius (squared; -1: not at all)
+        self._centre_at: Point | None = None
+        self._centre_safe2 = -1.0
+        self._cast_z: list[float] = []
         self.casts = 0  # batches cast, for the benchmark
 
-    def distances(self, points: Sequence[Point]) -> list[float]:
+    def distances_about(self, centre: Point, heights_m: Sequence[float]) -> list[float] | None:
+        """The distances of the points of the last cast made with a `centre`, now at world
+        heights `heights_m` with their body's centre at `centre`, without their horizontal
+        positions: known while the centre keeps within its safe radius (then so does every
+        point, whichever way the body turned); None when they must be given (`distances`)."""
+        c0 = self._centre_at
+        if c0 is None:
+            return None
+        dx, dy = centre[0] - c0[0], centre[1] - c0[1]
+        if dx * dx + dy * dy >= self._centre_safe2:
+            return None
+        out = []
+        for z, z0, level, sign, reach in zip(  # noqa: B905 (lengths equal)
+            heights_m, self._cast_z, self._levels, self._signs, self._reach
+        ):
+            if abs(z - z0) >= SLACK_M:
+                return None
+            h = sign * (level - z)
+            out.append(NO_HIT if h > reach else (h if h > 0.0 else 0.0))
+        return out
+
+    def distances(
+        self, points: Sequence[Point], centre: Point | None = None, span_m: float = 0.0
+    ) -> list[float]:
+        """The distances of `points`; with the `centre` of the rigid body they belong to (all
+        within `span_m` of it), a cast here serves `distances_about` too."""
         if self._cast_at:
             out = []
             # one pass: still within its safe radius and the vertical slack, each point's
@@ -93,7 +123,7 @@ class VerticalRays:
                 out.append(NO_HIT if h > reach else (h if h > 0.0 else 0.0))
             else:
                 return out
-        self._cast(points)
+        self._cast(points, centre, span_m)
         out = []
         for (_, _, z), level, sign, reach in zip(  # noqa: B905
             points, self._levels, self._signs, self._reach
@@ -102,7 +132,7 @@ class VerticalRays:
             out.append(NO_HIT if h > reach else (h if h > 0.0 else 0.0))
         return out
 
-    def _cast(self, points: Sequence[Point]) -> None:
+    def _cast(self, points: Sequence[Point], centre: Point | None, span_m: float) -> None:
         ends = [
             (x, y, z + sign * length)
             for (x, y, z), sign, length in zip(points, self._signs, self._lengths, strict=True)
@@ -125,4 +155,10 @@ class VerticalRays:
         safe = [edge_distance_m(x, y, self._footprints) - EDGE_MARGIN_M for x, y, _ in points]
         # within the margin: cast again at every call there
         self._safe2 = [d * d if d > 0.0 else -1.0 for d in safe]
+        # a point is within span_m of the centre, at the cast and later: the centre moving d
+        # moves it at most d + 2 span_m from where it was cast
+        self._centre_at = centre
+        self._cast_z = [z for _, _, z in points]
+        room = min(safe) - 2.0 * span_m
+        self._centre_safe2 = room * room if centre is not None and room > 0.0 else -1.0
         self.casts += 1

@@ -24,8 +24,11 @@ from autopilot.runner import MODES
 from learner.flightlogs.blueprint_reader import read_views
 from learner.flightlogs.recording import (
     ENTITY_PATHS,
+    FLIGHT_MODE_STATE,
     MISSION_PATH,
     OBSTACLES,
+    PHASE_STATE,
+    STATES,
     TRAJECTORY,
     WAYPOINTS,
     read_recording,
@@ -332,6 +335,12 @@ def test_the_layout_shows_data_in_every_view_and_tells_its_series_apart(flown):
             colors += np.atleast_1d(recording.static(p, "SeriesLines:colors")).tolist()
         assert len(set(names)) == len(names), f"{view.name}: {names}"
         assert len(set(colors)) == len(colors), f"{view.name}: {colors}"
+    # flight mode and phase as named states, in the order the flight went through them
+    states = next(v for v in views if v.kind == "StateTimeline")
+    assert states.origin == STATES
+    phases = [str(s) for s in recording.values(PHASE_STATE, "StateChange:state")]
+    assert phases[0] == "disarmed" and phases[-2:] == ["landing", "landed"]
+    assert "mission" in [str(s) for s in recording.values(FLIGHT_MODE_STATE, "StateChange:state")]
     z_view = next(v for v in views if v.name.startswith("z and"))
     low, high = z_view.y_range
     assert -0.2 < low <= log[:, 3].min() and log[:, 3].max() <= high < 2.0

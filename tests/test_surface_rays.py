@@ -58,6 +58,51 @@ def test_cached_rays_match_rays_cast_every_step_past_box_edges() -> None:
         assert 10 < rays.casts < steps / 3
 
 
+def _turning_body_path(boxes: tuple[Box, ...]) -> tuple[int, int, int]:
+    """Four hubs of a rigid body that moves and turns along a path past `boxes`, their
+    distances from `distances_about` where it knows them, checked against rays cast at every
+    step; returns (steps, steps known from heights alone, casts)."""
+    import dataclasses
+
+    world = dataclasses.replace(load_world("default"), obstacles=boxes)
+    with Simulation(world, load_vehicle(world.vehicle)) as sim:
+        cid = sim._cid
+        prints = [footprint(b.center_m, b.size_m, math.radians(b.yaw_deg)) for b in boxes]
+        signs, reach = [-1] * 4, [0.5] * 4
+        rays = VerticalRays(cid, prints, signs, reach, 1)
+        arm = 0.05
+        steps, known = 3000, 0
+        for k in range(steps):
+            t = k / steps
+            centre = (-0.1 + 1.3 * t, 0.25 * math.sin(7.0 * t), 0.35 + 0.2 * math.sin(11.0 * t))
+            yaw, tilt = 9.0 * t, 0.3 * math.sin(13.0 * t)  # turning and rolling
+            hubs = []
+            for i in range(4):
+                a = yaw + i * math.pi / 2.0
+                hubs.append((
+                    centre[0] + arm * math.cos(a) * math.cos(tilt),
+                    centre[1] + arm * math.sin(a) * math.cos(tilt),
+                    centre[2] + arm * math.sin(tilt) * (1.0 if i % 2 else -1.0),
+                ))  # fmt: skip
+            got = rays.distances_about(centre, [z for _, _, z in hubs])
+            if got is None:
+                got = rays.distances(hubs, centre, arm)
+            else:
+                known += 1
+            want = _every_step(cid, hubs, signs, reach)
+            np.testing.assert_allclose(got, want, atol=1e-5, rtol=0)
+        return steps, known, rays.casts
+
+
+def test_heights_about_a_turning_body_match_rays_cast_every_step() -> None:
+    """The physics step's path: hub heights alone, while the centre keeps to its safe radius."""
+    steps, known, casts = _turning_body_path(BOXES)
+    assert known > 0 and 10 < casts < steps / 3
+    # over an open floor: one cast, then heights alone
+    steps, known, casts = _turning_body_path(())
+    assert (known, casts) == (steps - 1, 1)
+
+
 def test_edge_distance_inside_and_outside_a_turned_box() -> None:
     fp = [footprint((1.0, 0.0), (2.0, 1.0), math.radians(90.0))]  # 1 m along x, 2 m along y
     assert edge_distance_m(1.0, 0.0, fp) == pytest.approx(0.5)

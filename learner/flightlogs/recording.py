@@ -73,6 +73,9 @@ SERIES: dict[str, tuple[str, ...]] = {
 COUNTERS = ("received", "dropped", "rejected")  # MAVLink counters per link, cumulative
 MAVLINK = "plots/mavlink"  # one entity per link: plots/mavlink/<link> with COUNTERS
 EVENTS = "events"  # TextLog: modes, arming, failsafes, link events, the end of the flight
+STATES = "states"  # StateChange, named states as they change: STATES/phase, STATES/flight_mode
+PHASE_STATE = f"{STATES}/phase"
+FLIGHT_MODE_STATE = f"{STATES}/flight_mode"
 META = "meta"  # static TextDocument: JSON with the flight's configuration and mode names
 SUMMARY = "summary"  # static TextDocument: JSON, the flight's summary (figures, how it ended)
 
@@ -93,6 +96,8 @@ ENTITY_PATHS: tuple[str, ...] = (
     *SERIES,
     f"{MAVLINK}/sim",
     EVENTS,
+    PHASE_STATE,
+    FLIGHT_MODE_STATE,
     META,
 )
 

@@ -76,16 +76,16 @@ def ground_effect_forces_n(
     """Equation 3.4 for every rotor in one call (the simulator's physics step): the same
     values as `ground_effect_force_n`, 0 where the height is beyond `reach_m` (or none)."""
     k = rho * rotor_radius_m * rotor_radius_m / 16.0  # rho (R / 4z)^2 = k / z^2
+    c2 = cutoff_m * cutoff_m
     f0, f1, f2, f3 = rotor_thrusts_n
     h0, h1, h2, h3 = heights_m
-    out = []
-    for f, h in ((f0, h0), (f1, h1), (f2, h2), (f3, h3)):
-        if h > reach_m:
-            out.append(0.0)
-            continue
-        z = h if h > cutoff_m else cutoff_m
-        out.append(f * (1.0 / (1.0 - k / (z * z)) - 1.0))
-    return out
+    # written out: the physics step calls this at 1 kHz
+    return [
+        0.0 if h0 > reach_m else f0 * (1.0 / (1.0 - k / (h0 * h0 if h0 > cutoff_m else c2)) - 1.0),
+        0.0 if h1 > reach_m else f1 * (1.0 / (1.0 - k / (h1 * h1 if h1 > cutoff_m else c2)) - 1.0),
+        0.0 if h2 > reach_m else f2 * (1.0 / (1.0 - k / (h2 * h2 if h2 > cutoff_m else c2)) - 1.0),
+        0.0 if h3 > reach_m else f3 * (1.0 / (1.0 - k / (h3 * h3 if h3 > cutoff_m else c2)) - 1.0),
+    ]
 
 
 def hover_rotor_speed_in_ground_effect_rad_s(
