@@ -46,7 +46,7 @@ def default_blueprint(
     learner = (
         [
             rrb.Vertical(
-                rrb.TimeSeriesView(origin="plots/learner/loss", name="learner loss"),
+                rrb.TimeSeriesView(origin="plots/learner/log10_loss", name="learner loss (log10)"),
                 rrb.TimeSeriesView(origin="plots/learner/version", name="weights version"),
                 name="learner",
             )

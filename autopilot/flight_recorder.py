@@ -272,6 +272,10 @@ class FlightRecorder:
                 keep = ~np.isnan(a[:, col])
                 if keep.any():
                     self._scalars(path, a[keep, 0], a[keep, col])
+            # rerun's axes are linear: a loss spanning decades reads as zero but for its peaks
+            keep = a[:, 1] > 0.0
+            if keep.any():
+                self._scalars("plots/learner/log10_loss", a[keep, 0], np.log10(a[keep, 1]))
         if self._estimator:
             a, self._estimator = np.asarray(self._estimator, dtype=float), []
             for col, name in enumerate(ESTIMATOR_ERRORS, start=1):

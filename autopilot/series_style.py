@@ -29,6 +29,7 @@ STYLES: dict[str, tuple[tuple[str, ...], tuple[Rgb, ...]]] = {
     "plots/rotors/commanded": (tuple(f"n{i} commanded" for i in range(4)), ROTOR_COLORS),
     "plots/rotors/actual": (tuple(f"n{i} actual (ESC)" for i in range(4)), ROTOR_ACTUAL_COLORS),
     "plots/learner/loss": (("loss (standardised)",), (RED,)),
+    "plots/learner/log10_loss": (("log10 of the loss (standardised)",), (RED,)),
     "plots/learner/version": (("weights version",), (BLUE,)),
     **{
         f"plots/ground_effect/{axis}/{kind}": ((kind,), (GE_COLORS[kind],))

@@ -221,6 +221,7 @@ def test_the_recorder_takes_learner_reports_and_events_from_the_loop(tmp_path):
     t_version, version = recording.scalars("plots/learner/version")
     assert version[:, 0].tolist() == [0.0, 1.0] and t_version[1] == pytest.approx(2.0)
     assert recording.scalars("plots/learner/loss")[1][:, 0].tolist() == [0.25]
+    assert recording.scalars("plots/learner/log10_loss")[1][:, 0] == pytest.approx([-0.60206])
     assert (pytest.approx(2.0), "WARN", "failsafe: link lost") in recording.texts()
     assert recording.scalars("plots/mavlink/gcs")[1][-1].tolist() == [7.0, 1.0, 2.0]
     assert len(recording.times("plots/rotors/actual")) == 0  # no ESC telemetry came

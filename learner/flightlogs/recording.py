@@ -68,6 +68,7 @@ SERIES: dict[str, tuple[str, ...]] = {
     "plots/rates": ("p", "q", "r"),  # rad/s, body FLU
     "plots/acceleration": ("ax", "ay", "az"),  # m/s^2, world, gravity removed
     "plots/learner/loss": ("loss",),  # online learner's loss (standardised units)
+    "plots/learner/log10_loss": ("log10 loss",),  # the same on a log scale, for the viewer
     "plots/learner/version": ("version",),  # weight-snapshot version the controller uses
 }
 COUNTERS = ("received", "dropped", "rejected")  # MAVLink counters per link, cumulative

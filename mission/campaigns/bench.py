@@ -52,6 +52,8 @@ def bench_sitl(world: str = "default", repeat: int = 5) -> dict[str, Any]:
         "controller_us_p99",
         "estimator_controller_us_p50",
         "estimator_controller_us_p99",
+        "estimator_correction_us_p50",
+        "estimator_correction_us_p99",
         "sim_s",
         "wall_s",
         "steps",
