@@ -29,6 +29,7 @@ from learner.flightlogs.recording import (
     OBSTACLES,
     PHASE_STATE,
     STATES,
+    TIMELINE,
     TRAJECTORY,
     WAYPOINTS,
     read_recording,
@@ -244,6 +245,23 @@ def test_review_refuses_what_is_not_a_recording(tmp_path):
     refused = run_groundfx("review", str(junk))
     assert refused.returncode == 2 and "Traceback" not in refused.stderr
     assert "junk.rrd: not a rerun recording" in refused.stderr
+
+
+def test_a_recording_of_another_rerun_program_is_read(tmp_path):
+    """Files written by any rerun program carry log_time (nanosecond timestamps) and
+    log_tick; they are read, not a traceback."""
+    import rerun as rr
+
+    path = tmp_path / "other.rrd"
+    rec = rr.RecordingStream("someone_else")
+    rec.save(path)
+    rec.set_time(TIMELINE, duration=1.5)
+    rec.log("door", rr.StateChange(state="open"))
+    rec.log("speed", rr.Scalars(2.0))
+    rec.flush()
+    recording = read_recording(path)
+    assert recording.times("speed").tolist() == [1.5]
+    assert recording.scalars("speed")[1][:, 0].tolist() == [2.0]
 
 
 def _free_port() -> int:

@@ -216,18 +216,24 @@ def _add_chunk(entities: dict[str, Entity], path: str, batch: pa.RecordBatch) ->
     times = None
     if TIMELINE in names:
         times = batch.column(TIMELINE).cast(pa.int64()).to_numpy(zero_copy_only=False) * 1e-9
+    # components are list columns; the rest are indices (our timeline, and the log_time and
+    # log_tick of recordings written by other rerun programs)
     columns = {
         name: _to_numpy(batch.column(name))
         for name in names
-        if name != TIMELINE and not name.startswith("rerun.")
+        if not name.startswith("rerun.") and _is_list(batch.column(name).type)
     }
     entities.setdefault(path, Entity(path)).chunks.append((times, columns))
+
+
+def _is_list(kind: pa.DataType) -> bool:
+    return bool(pa.types.is_list(kind) or pa.types.is_large_list(kind))
 
 
 def _to_numpy(column: pa.Array) -> Any:
     """A list column as [rows, width] when every row has the same width of numbers, else as
     a list of per-row Python values."""
-    if pa.types.is_list(column.type) or pa.types.is_large_list(column.type):
+    if _is_list(column.type):
         flat = column.flatten()
         lengths = column.value_lengths().to_numpy(zero_copy_only=False)
         inner = flat.type
