@@ -69,8 +69,6 @@ class SimLink:
         )
         self._controls = [0.0] * 16
         self.received = 0  # messages decoded
-        # our own simulator, on the Unix-domain transport, sends each tick's truth after it
-        self.truth_follows = url.startswith("unix:")
 
     @property
     def malformed(self) -> int:
@@ -97,12 +95,15 @@ class SimLink:
             self._read()
 
     def receive_truth(self, step: Step) -> None:
-        """Where the truth follows the tick: read on to the HIL_STATE_QUATERNION of `step`'s
-        tick (its end), so that `step` holds that tick's truth. Called after the reply, off
-        the control path; a no-op where the truth comes before the tick."""
-        if not self.truth_follows:
-            return
+        """Read on to the truth of `step`'s tick: its HIL_STATE_QUATERNION (the end of the truth
+        our simulator sends right after each tick), so that `step` holds that tick's truth.
+        Called after the reply, off the control path. A simulator that sends its truth before
+        the tick (the PX4 order) has it there already; one that sends none ends the wait with
+        its next tick, which is left for `receive_step`."""
         time_us = step.sensor["time_usec"]
+        truth = self._latest.get("HIL_STATE_QUATERNION")
+        if truth is not None and truth["time_usec"] >= time_us:
+            return
         while True:
             while self._queue:
                 kind, fields = self._queue[0]

@@ -147,24 +147,23 @@ class HilEncoder:
         return k > 0 and self._steps % k == 0
 
     def encode(self, state: VehicleState, time_us: int, truth: EffectForces | None = None) -> bytes:
-        """All messages of one control step at `time_us`, as one buffer for one send: the
-        truth first, HIL_SENSOR last (the PX4 order, for any autopilot).
-
-        `truth`, the simulator's true effect forces, travels as DEBUG_VECT "GE_TRUE" (the
-        world-frame ground-effect force, N): for evaluation and recordings, never control.
-        """
-        self._advance(state)
-        return self._truth_bytes(time_us, truth) + self._tick_bytes(time_us)
+        """All messages of one control step at `time_us`, in the order the simulator sends
+        them (`tick`, then `truth`)."""
+        return self.tick(state, time_us) + self.truth(time_us, truth)
 
     def tick(self, state: VehicleState, time_us: int) -> bytes:
-        """The sensors of one control step, HIL_SENSOR last, without the truth: where both
-        ends are ours, the truth follows the tick (`truth`), encoded and read while the other
-        side computes, off the lockstep's path."""
+        """The sensors of one control step, HIL_SENSOR last: the tick a lockstep autopilot
+        answers. The truth follows in a second send (`truth`), encoded while the autopilot
+        computes its reply, off the lockstep's path."""
         self._advance(state)
         return self._tick_bytes(time_us)
 
     def truth(self, time_us: int, forces: EffectForces | None = None) -> bytes:
-        """The truth of the step `tick` encoded, HIL_STATE_QUATERNION last (the end of it)."""
+        """The truth of the step `tick` encoded, HIL_STATE_QUATERNION last (the end of it).
+
+        `forces`, the simulator's true effect forces, travel as DEBUG_VECT "GE_TRUE" (the
+        world-frame ground-effect force, N): for evaluation and recordings, never control.
+        """
         return self._truth_bytes(time_us, forces)
 
     def _advance(self, state: VehicleState) -> None:

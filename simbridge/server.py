@@ -161,17 +161,12 @@ class SimServer:
     def _send_step(
         self, conn: socket.socket, encoder: HilEncoder, sim: Simulation, *, with_forces: bool
     ) -> None:
-        """One step's messages. To our own autopilot (the Unix-domain transport) the truth
-        follows the tick in a second send, encoded while the autopilot computes its reply;
-        to any other, in the PX4 order before it."""
-        state, time_us = sim.state(), sim.time_us
-        if self.options.unix_path is None:
-            forces = sim.effect_forces() if with_forces else None
-            self._send(conn, encoder.encode(state, time_us, forces))
-            return
-        self._send(conn, encoder.tick(state, time_us))
+        """One step's messages: the tick (the sensors, HIL_SENSOR last), then in a second send
+        its truth, encoded while the autopilot computes its reply (an autopilot answers
+        HIL_SENSOR and takes the rest as it comes; ours reads the truth after its reply)."""
+        self._send(conn, encoder.tick(sim.state(), sim.time_us))
         forces = sim.effect_forces() if with_forces else None
-        self._send(conn, encoder.truth(time_us, forces))
+        self._send(conn, encoder.truth(sim.time_us, forces))
 
     def _send(self, conn: socket.socket, data: bytes) -> None:
         try:

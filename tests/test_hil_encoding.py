@@ -53,7 +53,9 @@ def test_a_level_hovering_state_in_mavlink_units_and_frames():
             8000,
         )
     )
-    assert list(msgs)[-1] == "HIL_SENSOR"  # the tick comes last
+    # the tick (HIL_SENSOR) after every sensor, then its truth (here the state alone: no
+    # effect forces given)
+    assert list(msgs)[-2:] == ["HIL_SENSOR", "HIL_STATE_QUATERNION"]
     sensor = msgs["HIL_SENSOR"][0]
     assert (sensor.xacc, sensor.yacc, sensor.zacc) == pytest.approx((0.0, 0.0, -9.81))
     assert (sensor.xgyro, sensor.ygyro, sensor.zgyro) == pytest.approx((0.01, -0.02, -0.03))

@@ -73,8 +73,9 @@ def test_a_pymavlink_client_drives_1000_lockstep_steps(sim_process, write_world)
     seen: dict[str, int] = {}
 
     # Before the first actuators the drone stands at its start pose: check what it reports.
-    state = next_of(conn, {"HIL_STATE_QUATERNION"}, seen)
+    # the tick (HIL_SENSOR), then its truth
     sensor = next_of(conn, {"HIL_SENSOR"}, seen)
+    state = next_of(conn, {"HIL_STATE_QUATERNION"}, seen)
     assert state.time_usec == sensor.time_usec
     # NED/FRD: roll keeps its sign, FLU pitch (+ nose down) flips, yaw from east becomes from north.
     expected_q = Quaternion([math.radians(10.0), math.radians(5.0), math.radians(90.0 - 30.0)])
@@ -108,6 +109,8 @@ def test_a_pymavlink_client_drives_1000_lockstep_steps(sim_process, write_world)
         answer(conn, sensor, commands)
     assert all(b > a for a, b in pairwise(times))  # strictly increasing
     assert {b - a for a, b in pairwise(times)} == {4000}
+    # the last tick's truth follows it, whatever the autopilot answered
+    assert next_of(conn, {"HIL_STATE_QUATERNION"}, seen).time_usec == times[-1]
     assert seen["HIL_STATE_QUATERNION"] == 1000
     assert 38 <= seen["HIL_GPS"] <= 42  # 10 Hz over 4 s
     assert 198 <= seen["DISTANCE_SENSOR"] <= 202  # 50 Hz
