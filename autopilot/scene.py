@@ -17,6 +17,7 @@ from learner.flightlogs.recording import (
     DRONE_BODY,
     DRONE_ROTORS,
     GROUND,
+    MISSION_LABELS,
     MISSION_PATH,
     OBSTACLES,
     WAYPOINTS,
@@ -35,6 +36,7 @@ COLOR_BODY = (40, 40, 40)
 COLOR_FRONT_ROTOR = (220, 60, 60)  # so that the heading reads at a glance
 COLOR_BACK_ROTOR = (170, 170, 170)
 COLOR_MISSION = (80, 160, 255)
+LABEL_LIFT_M = 0.15  # mission labels this far above their points
 
 
 def surface_height_m(x: float, y: float, boxes: Sequence[Box]) -> float:
@@ -176,5 +178,9 @@ def log_mission(
     """Waypoints with labels and the planned path, at the current time (a new mission
     replaces the old one)."""
     shown, text = merged_points(points, labels)
-    rec.log(WAYPOINTS, rr.Points3D(shown, radii=0.01, colors=[COLOR_MISSION], labels=text))
+    rec.log(WAYPOINTS, rr.Points3D(shown, radii=0.01, colors=[COLOR_MISSION]))
+    # the labels above their points: at the point, the landing's would cover the vehicle
+    # standing there (10 cm across)
+    lifted = [(x, y, z + LABEL_LIFT_M) for x, y, z in shown]
+    rec.log(MISSION_LABELS, rr.Points3D(lifted, radii=0.0, colors=[COLOR_MISSION], labels=text))
     rec.log(MISSION_PATH, rr.LineStrips3D([list(path)], colors=[COLOR_MISSION], radii=0.002))

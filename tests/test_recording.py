@@ -21,10 +21,12 @@ from autopilot.flight_recorder import FlightRecorder
 from autopilot.mission_items import Home, plan_steps
 from autopilot.record_options import RecordOptions
 from autopilot.runner import MODES
+from autopilot.scene import LABEL_LIFT_M
 from learner.flightlogs.blueprint_reader import read_views
 from learner.flightlogs.recording import (
     ENTITY_PATHS,
     FLIGHT_MODE_STATE,
+    MISSION_LABELS,
     MISSION_PATH,
     OBSTACLES,
     PHASE_STATE,
@@ -233,6 +235,9 @@ def test_the_recorder_takes_learner_reports_and_events_from_the_loop(tmp_path):
     # every corner drawn (items at one place share one point and one label)
     gaps = [np.min(np.abs(drawn - np.asarray(c)).max(axis=1)) for c in corners]
     assert max(gaps) < 1e-5 and len(drawn) <= len(plan)
+    # their labels above them, where they do not cover a vehicle standing on a point
+    labelled = recording.values(MISSION_LABELS, "Points3D:positions")[-1].reshape(-1, 3)
+    assert np.allclose(labelled - drawn, (0.0, 0.0, LABEL_LIFT_M))
     assert len(recording.values(MISSION_PATH, "LineStrips3D:strips")) > 0
 
 

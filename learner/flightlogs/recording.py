@@ -33,7 +33,8 @@ GE_ARROW_M_PER_N = 1.0  # ground-effect arrows in the 3-D view: 1 m per newton
 WORLD = "world"  # ViewCoordinates RIGHT_HAND_Z_UP
 GROUND = "world/ground"  # a thin slab whose top is z = 0
 OBSTACLES = "world/obstacles"  # boxes of the world file (only when it has any)
-WAYPOINTS = "world/mission/waypoints"  # points with labels, logged when the flight starts
+WAYPOINTS = "world/mission/waypoints"  # points, logged when the flight starts
+MISSION_LABELS = "world/mission/labels"  # their labels, lifted above them (not over the drone)
 MISSION_PATH = "world/mission/path"  # start, take-off point, waypoints, landing point
 DRONE = "world/drone"  # Transform3D at 50 Hz (the pose; body frame FLU); plots: every step
 DRONE_BODY = "world/drone/body"  # the body box, in the body frame
