@@ -18,7 +18,7 @@ import rerun.blueprint.components as rrbc
 from learner.flightlogs.recording import EVENTS, MAVLINK, STATES, TIMELINE, WORLD
 from simbridge.frames import Vec3
 
-EYE_OFFSET_M = (-1.3, -1.3, 2.2)  # where the 3-D camera stands, from the point it looks at
+EYE_OFFSET_M = (-1.6, -1.6, 2.7)  # where the 3-D camera stands, from the point it looks at
 DEFAULT_Z_RANGE_M = (-0.05, 1.5)  # the z view's range until a mission gives its heights
 Z_MARGIN_M = (0.05, 0.25)
 NEAR_GROUND_RANGE_M = (-0.005, 0.1)  # below the lowest and above the highest point of the mission

@@ -36,7 +36,8 @@ COLOR_BODY = (40, 40, 40)
 COLOR_FRONT_ROTOR = (220, 60, 60)  # so that the heading reads at a glance
 COLOR_BACK_ROTOR = (170, 170, 170)
 COLOR_MISSION = (80, 160, 255)
-LABEL_LIFT_M = 0.15  # mission labels this far above their points
+LABEL_LIFT_M = 0.15  # mission labels at least this far above their points ...
+LABEL_LIFT_SHARE = 0.25  # ... or this share of the mission's height, whichever is more
 
 
 def surface_height_m(x: float, y: float, boxes: Sequence[Box]) -> float:
@@ -118,7 +119,10 @@ def log_drone(rec: rr.RecordingStream, vehicle: Vehicle) -> None:
     colors = [COLOR_FRONT_ROTOR if h[0] > 0 else COLOR_BACK_ROTOR for h in hubs]
     rec.log(
         DRONE_ROTORS,
-        rr.LineStrips3D(discs, colors=colors, labels=[str(i) for i in range(len(hubs))]),
+        # the rotors' numbers on hovering (shown, they would cover the drone at a distance)
+        rr.LineStrips3D(
+            discs, colors=colors, labels=[str(i) for i in range(len(hubs))], show_labels=False
+        ),
         static=True,
     )
 
@@ -180,7 +184,9 @@ def log_mission(
     shown, text = merged_points(points, labels)
     rec.log(WAYPOINTS, rr.Points3D(shown, radii=0.01, colors=[COLOR_MISSION]))
     # the labels above their points: at the point, the landing's would cover the vehicle
-    # standing there (10 cm across)
-    lifted = [(x, y, z + LABEL_LIFT_M) for x, y, z in shown]
+    # standing there (10 cm across, small in a view framed on the whole mission)
+    heights = [z for _, _, z in shown] or [0.0]
+    lift = max(LABEL_LIFT_M, LABEL_LIFT_SHARE * (max(heights) - min(heights)))
+    lifted = [(x, y, z + lift) for x, y, z in shown]
     rec.log(MISSION_LABELS, rr.Points3D(lifted, radii=0.0, colors=[COLOR_MISSION], labels=text))
     rec.log(MISSION_PATH, rr.LineStrips3D([list(path)], colors=[COLOR_MISSION], radii=0.002))
