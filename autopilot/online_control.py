@@ -20,7 +20,7 @@ from autopilot.ground_models import GroundEffectModel, default_network
 from autopilot.params import ONLINE_METHODS, ParamStore
 from learner.dataset import COLUMNS, FEATURES, TARGETS
 from learner.online.memory import Memory, load_memory, memory_path_for, offline_path_for
-from learner.online.names import NEEDS_MEMORY
+from learner.online.names import NEEDS_BASIS, NEEDS_MEMORY
 from simbridge.config import ConfigError
 
 # torch, and the learner with it, load only when learning is on: a flight without it
@@ -85,6 +85,17 @@ def find_offline(network: str | Path | None, rho: float, net: Any) -> Any:
     return load_model(path)
 
 
+def vertical_tracking_error(state: Any, setpoint: Any) -> float:
+    """The position loop's vertical composite error s = (v_z - v_dz) + Lambda (z - z_d) [m/s]
+    (Neural-Fly's s, Lambda 1/s), for `composite`'s tracking term; 0 without a setpoint."""
+    if setpoint is None:
+        return 0.0
+    from learner.online.composite_session import LAMBDA_PER_S
+
+    dz = state.position_m[2] - setpoint.position_m[2]
+    return (state.velocity_m_s[2] - setpoint.velocity_m_s[2]) + LAMBDA_PER_S * dz
+
+
 class OnlineControl:
     def __init__(
         self, options: OnlineOptions, params: ParamStore, network: str | Path | None
@@ -108,7 +119,13 @@ class OnlineControl:
             from learner.model import load_model
 
             rho = params.model()[1]
-            find_offline(network, rho, load_model(network or default_network(rho)))
+            net = load_model(network or default_network(rho))
+            find_offline(network, rho, net)
+            if settings.method in NEEDS_BASIS and not net.header.get("basis"):
+                raise ConfigError(
+                    f"--online {settings.method}: needs a model trained over several grounds "
+                    "(--network grounds; make one with groundfx learn basis)"
+                )
 
     @property
     def sample_hz(self) -> float:
@@ -152,10 +169,11 @@ class OnlineControl:
         if self.learner is not None and not self.learner.wait_ready():
             self.errors.append("the learner process was not up within a minute of the start")
 
-    def submit(self, row: tuple[float, ...]) -> None:
+    def submit(self, row: tuple[float, ...], tracking_m_s: float = 0.0) -> None:
+        """A learning sample, with the position loop's vertical composite error [m/s]."""
         if self.active and self.learner is not None:
             r = np.asarray(row)
-            self.learner.submit(r[FEATURE_COLUMNS], r[TARGET_COLUMNS], float(r[0]))
+            self.learner.submit(r[FEATURE_COLUMNS], r[TARGET_COLUMNS], float(r[0]), tracking_m_s)
 
     def apply(self, model: GroundEffectModel) -> None:
         """The current snapshot into the neural model: one reference read per step."""

@@ -61,7 +61,7 @@ class ModelParams:
     rho: float = param(1.0, lo=0.01, hi=50.0, doc="rho of the analytic model (equation 3.4)")
 
 
-ONLINE_METHODS = ("off", "naive", "constraint", "margin", "ewc", "replay", "rls")
+ONLINE_METHODS = ("off", "naive", "constraint", "margin", "ewc", "replay", "rls", "composite")
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,10 @@ class OnlineParams:
     """The online learner (learner/online/settings.py has the rest of its settings)."""
 
     method: int = param(
-        0, lo=0, hi=6, doc="0 off, 1 naive, 2 constraint, 3 margin, 4 ewc, 5 replay, 6 rls"
+        0,
+        lo=0,
+        hi=7,
+        doc="0 off, 1 naive, 2 constraint, 3 margin, 4 ewc, 5 replay, 6 rls, 7 composite",
     )
     learning_rate: float = param(1e-3, lo=1e-7, hi=1.0, doc="Adam step size")
     penalty: float = param(1.0, lo=0.0, hi=1e6, doc="lambda of constraint, margin, ewc")

@@ -36,7 +36,7 @@ from autopilot.mission_items import MissionItem
 from autopilot.modes import FlightMode
 from autopilot.nav_metrics import estimation_error, estimator_metrics
 from autopilot.navigation import Navigation
-from autopilot.online_control import OnlineControl, OnlineOptions
+from autopilot.online_control import OnlineControl, OnlineOptions, vertical_tracking_error
 from autopilot.params import ParamStore
 from autopilot.record_options import RecordOptions
 from autopilot.recorder import open_recorder
@@ -274,7 +274,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 row = learning_sample(
                     t, step, state, height, applied, vehicle, nav.accel_bias_m_s2()
                 )
-                online.submit(row)
+                online.submit(row, vertical_tracking_error(state, cmd.setpoint))
                 if config.record_hz > 0.0:
                     samples.append(row)
                 period = 1.0 / sample_hz  # on a 100 Hz schedule, 250 Hz steps

@@ -14,7 +14,19 @@ reproducible).
   --save-model) flies the same trial again at rho = 1 without learning. Forgetting is its
   error against the offline-only network's at rho = 1, twice: the hold error of its own
   flight, and its ground-effect error at least 0.5 m above the ground along the offline-only
-  network's flight of the same trial, where the two worlds agree.
+  network's flight of the same trial, where the two worlds agree. `composite` flies back
+  with the method on: recalling a ground from its memory is part of the method (it learns
+  nothing new unless the confidence test finds a consistent error).
+
+`composite` flies the basis model (`basis`, default the packaged `grounds`) instead of the
+offline network; the basis with its home ground's coefficients and no learning is a
+condition of its own (`basis-offline`), so that what the basis gives and what adapting it
+gives are told apart.
+
+The controller: `thesis` (the default here) is the thesis's position PD (a0 = 1, a1 = 2, no
+integral), on which a model error shows in the hold (1 mN is 18 mm): with the integral of
+the default controller (`default`) a steady model error is flown out within seconds, and
+what remains of the hold error measures the estimator's noise more than the model.
 """
 
 from __future__ import annotations
@@ -32,7 +44,7 @@ import yaml
 from autopilot.metrics import FAR_FROM_GROUND_M, NEAR_GROUND_M
 from learner.flightlogs.readers import read_log
 from learner.model import load_model
-from learner.online.names import METHODS, PROTECTING
+from learner.online.names import METHODS, NEEDS_BASIS, PROTECTING
 from learner.stats import gap_closed, mean_ci95
 from mission.campaigns.gather import world_yaml_with_rho
 from mission.campaigns.trials import landing_trial
@@ -45,6 +57,11 @@ DEFAULT_HOLD_S = 10.0
 AIRBORNE_ABOVE_M = 0.015  # centre of mass above the flat ground: in the air (rests at 12.6 mm)
 SAME_M = 1e-5  # 0.01 mm: hold errors closer than this are the same
 MAX_FLIGHT_S = 240.0  # a trial lasts 30-80 s simulated; one that floats longer has failed
+BASIS_NETWORK = "grounds"  # the packaged basis model (learner/basis.py)
+CONTROLLERS: dict[str, tuple[str, ...]] = {
+    "thesis": ("GFX_POS_P=1", "GFX_POS_D=2", "GFX_POS_I=0"),  # the thesis's PD (3.7)
+    "default": (),
+}
 
 
 def trial_file(directory: Path, seed: int, hold_s: float) -> tuple[Path, str]:
@@ -133,17 +150,28 @@ def run_online_eval(
     params: tuple[str, ...] = (),
     say: Callable[[str], None] = print,
     workers: int = 1,
+    controller: str = "thesis",
+    basis: str = BASIS_NETWORK,
 ) -> dict[str, Any]:
-    results: dict[str, Any] = {"seeds": seeds, "hold_s": hold_s, "network": network}
+    results: dict[str, Any] = {
+        "seeds": seeds,
+        "hold_s": hold_s,
+        "network": network,
+        "basis": basis,
+        "controller": controller,
+    }
     extra = tuple(a for p in params for a in ("--param", p))
+    control = tuple(a for p in CONTROLLERS[controller] for a in ("--param", p))
     # each flight is its own simulator and autopilot processes: threads only wait on them
     pool = ThreadPoolExecutor(max_workers=workers)
 
     def errors_of(calls: Sequence[tuple[Any, ...]]) -> np.ndarray:
-        return np.array(list(pool.map(lambda c: hold_error(*c), calls)))
+        return np.array(list(pool.map(lambda c: hold_error(*c, *control), calls)))
 
     def logged_errors_of(calls: Sequence[tuple[tuple[Any, ...], Path]]) -> np.ndarray:
-        return np.array(list(pool.map(lambda c: hold_error(*c[0], flight_log=c[1]), calls)))
+        return np.array(
+            list(pool.map(lambda c: hold_error(*c[0], *control, flight_log=c[1]), calls))
+        )
 
     with pool, tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
@@ -152,9 +180,14 @@ def run_online_eval(
         for rho in rhos:
             world = world_file(d, rho)
             errors: dict[str, np.ndarray] = {}
-            conditions = [("offline", "neural", ()), ("analytic", "analytic", ())]
-            conditions += [(m, "neural", ("--online", m, *extra)) for m in methods]
-            for name, model, options in conditions:
+            conditions = [("offline", "neural", network, ()), ("analytic", "analytic", None, ())]
+            if any(m in NEEDS_BASIS for m in methods):
+                conditions.append(("basis-offline", "neural", basis, ()))
+            conditions += [
+                (m, "neural", basis if m in NEEDS_BASIS else network, ("--online", m, *extra))
+                for m in methods
+            ]
+            for name, model, net, options in conditions:
                 calls = []
                 for (mission, start), seed in zip(trials, seeds, strict=True):
                     save: tuple[str, ...] = ()
@@ -162,12 +195,13 @@ def run_online_eval(
                         path = d / f"{name}_{seed}.npz"
                         adapted[name].append(path)
                         save = ("--save-model", str(path))
-                    net = None if model == "analytic" else network
                     calls.append((mission, start, world, model, rho, net, *options, *save))
                 errors[name] = errors_of(calls)
                 _say_row(say, f"rho_sim {rho:g}", name, errors[name])
             gaps = {
-                m: gap_closed(errors["offline"], errors["analytic"], errors[m]) for m in methods
+                m: gap_closed(errors["offline"], errors["analytic"], errors[m])
+                for m in errors
+                if m not in ("offline", "analytic")
             }
             say(
                 f"rho_sim {rho:g}: gap closed (offline -> analytic): "
@@ -179,7 +213,7 @@ def run_online_eval(
             }
         if remember and 2.0 in rhos:
             results["remember"] = _remember(
-                d, trials, methods, network, adapted, say, errors_of, logged_errors_of
+                d, trials, methods, network, adapted, say, errors_of, logged_errors_of, extra
             )
     return results
 
@@ -193,6 +227,7 @@ def _remember(
     say: Callable[[str], None],
     errors_of: Callable[[Sequence[tuple[Any, ...]]], np.ndarray],
     logged_errors_of: Callable[[Sequence[tuple[tuple[Any, ...], Path]]], np.ndarray],
+    extra: tuple[str, ...] = (),
 ) -> dict[str, Any]:
     """4.4: back at rho = 1 with the networks adapted at rho = 2, learning off. Two errors
     against offline-only: the hold error of the network's own flight (near the ground rho 1
@@ -217,9 +252,11 @@ def _remember(
         "far_error_n": {},
     }
     for method in methods:
+        # composite recalls a ground only with the method on; the others fly as adapted
+        again = ("--online", method, *extra) if method in NEEDS_BASIS else ()
         errors = errors_of(
             [
-                (m, s, world, "neural", 1.0, str(path))
+                (m, s, world, "neural", 1.0, str(path), *again)
                 for (m, s), path in zip(trials, adapted[method], strict=True)
             ]
         )
