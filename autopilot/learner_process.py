@@ -50,6 +50,9 @@ def learner_main(
         conn.send(("error", f"learner did not start: {err}"))
         conn.send(("summary", {}, {}, None))
         return
+    if session.snapshot.version > 0:  # composite starts on its home ground: publish it
+        net = session.snapshot.net
+        conn.send(("snapshot", 1, net.weights, net.biases, 0.0, None, net.header.get("basis")))
     conn.send(("ready",))
     while True:
         try:

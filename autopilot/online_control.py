@@ -85,10 +85,15 @@ def find_offline(network: str | Path | None, rho: float, net: Any) -> Any:
     return load_model(path)
 
 
+HOLDING_M_S = 1e-3  # a setpoint moving slower than this holds still
+
+
 def vertical_tracking_error(state: Any, setpoint: Any) -> float:
     """The position loop's vertical composite error s = (v_z - v_dz) + Lambda (z - z_d) [m/s]
-    (Neural-Fly's s, Lambda 1/s), for `composite`'s tracking term; 0 without a setpoint."""
-    if setpoint is None:
+    (Neural-Fly's s, Lambda 1/s), for `composite`'s tracking term; 0 without a setpoint or
+    while it moves: a slow position loop lags a moving setpoint by centimetres, which is the
+    loop's doing, not the model's (only a held setpoint's error is a model error)."""
+    if setpoint is None or max(abs(v) for v in setpoint.velocity_m_s) > HOLDING_M_S:
         return 0.0
     from learner.online.composite_session import LAMBDA_PER_S
 

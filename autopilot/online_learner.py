@@ -74,6 +74,7 @@ class OnlineLearner:
         if deterministic:
             self.session = OnlineSession(base, settings, memory, offline)
             self.session.warm_up()  # not in the first update of the flight
+            self.snapshot = self.session.snapshot  # composite: its home ground
             return
         self._queue_size = queue_size
         self._chunk_samples = max(1, min(CHUNK_SAMPLES, queue_size))

@@ -81,25 +81,36 @@ def test_a_consistent_error_is_learnt_near_the_ground_and_the_far_field_kept(gro
 
 
 def test_a_ground_is_remembered_and_recalled_whole(tmp_path):
-    """Adapt to rho 2 (a new ground), save; the next flight starts on it and, at rho 1,
-    recalls rho 1's coefficients exactly instead of learning them again."""
+    """Adapt to rho 2 (a new ground), save. The next flight starts on the home ground (rho 1:
+    before take-off nothing tells grounds apart); back at rho 2 it recalls the rho 2 ground
+    whole instead of learning it again, and at rho 1 it recalls rho 1's coefficients exactly."""
     learner = OnlineLearner(BASIS, COMPOSITE)
     x, y, t = samples("rho2", 1500, seed=3)
     for k in range(len(x)):
         learner.submit(x[k], y[k], t[k])
     assert learner.summary()["online_ground"] == "learnt-1"
+    learnt = learner.snapshot.net
     saved = learner.save(tmp_path / "adapted.npz")
     carried = load_model(saved)
-    grounds, start = grounds_from_header(carried.header, BASIS.weights[-1].shape[1])
-    assert [g.name for g in grounds][start] == "learnt-1"
+    grounds, _ = grounds_from_header(carried.header, BASIS.weights[-1].shape[1])
+    assert [g.name for g in grounds] == ["rho0.5", "rho1", "rho2", "learnt-1"]
     assert rms_n(carried, ground_net("rho2"), NEAR) < 0.2 * rms_n(BASIS, ground_net("rho2"), NEAR)
-    back = OnlineSession(carried, COMPOSITE, offline=load_model(tmp_path / "adapted.offline.npz"))
-    back.add_many(*samples("rho1", 600, seed=4))
-    assert back.counts["recalled"] >= 1 and back.counts["adapted"] == 0
-    assert np.array_equal(back.snapshot.net.weights[-1][Z], BASIS.weights[-1][Z])
-    assert back.snapshot.net.biases[-1][Z] == BASIS.biases[-1][Z]
+    offline = load_model(tmp_path / "adapted.offline.npz")
+
+    def home_row(net: GroundEffectNet) -> bool:
+        return np.array_equal(net.weights[-1][Z], BASIS.weights[-1][Z])
+
+    again = OnlineSession(carried, COMPOSITE, offline=offline)
+    assert home_row(again.snapshot.net)  # starts on the home ground
+    again.add_many(*samples("rho2", 600, seed=4))
+    assert again.counts["recalled"] >= 1 and again.counts["adapted"] == 0
+    assert np.array_equal(again.snapshot.net.weights[-1], learnt.weights[-1])
+    again.add_many(*samples("rho1", 600, seed=5))
+    assert again.counts["recalled"] >= 2 and again.counts["adapted"] == 0
+    assert home_row(again.snapshot.net)
+    assert again.snapshot.net.biases[-1][Z] == BASIS.biases[-1][Z]
     # and the rho 2 ground is still in memory, for the next return
-    names = [g["name"] for g in back.snapshot.net.header["basis"]["learnt"]]
+    names = [g["name"] for g in again.snapshot.net.header["basis"]["learnt"]]
     assert names == ["learnt-1"]
 
 

@@ -40,6 +40,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 Z = 2  # the vertical target's row in the last layer
+MAX_LEARNT = 8  # grounds learnt in flight that the memory keeps (the oldest goes first)
 
 
 @dataclass(frozen=True)
@@ -241,6 +242,9 @@ def composite_update(
     if grounds[current].protected:  # learning on an offline ground: a new ground
         learnt += 1
         grounds.append(Ground(f"learnt-{learnt}", a.copy(), False))
+        kept = [g for g in grounds if not g.protected]
+        if len(kept) > MAX_LEARNT:  # the oldest learnt ground makes room
+            grounds.remove(kept[0])
         current = len(grounds) - 1
     else:
         grounds[current] = replace(grounds[current], coefficients=a.copy())

@@ -12,7 +12,6 @@ from learner.online.composite import (
     CompositeConfig,
     CompositeState,
     Decision,
-    Ground,
     Z,
     composite_update,
     grounds_from_header,
@@ -47,7 +46,10 @@ def composite_config(
 def start_state(base: GroundEffectNet, config: CompositeConfig) -> CompositeState:
     """The memory a basis model brings: its home ground (protected) and the grounds learnt
     in earlier flights; the other offline grounds shape the prior (where grounds differ).
-    It starts on the ground its last layer holds."""
+    A flight starts on the home ground, whatever ground the file's last layer holds: before
+    take-off nothing tells the grounds apart (a vehicle that starts on a ground pushing
+    harder than the one under it may not leave it), and a learnt ground is recalled once
+    the data show it."""
     header = base.header
     if not header.get("basis"):
         raise ConfigError(
@@ -59,19 +61,18 @@ def start_state(base: GroundEffectNet, config: CompositeConfig) -> CompositeStat
     home = header["basis"]["home"]
     memory = tuple(g for g in known if not g.protected or g.name == home)
     others = [g.coefficients for g in known if g.protected and g.name != home]
-    in_use = np.concatenate([base.weights[-1][Z], base.biases[-1][Z : Z + 1]])
     names = [g.name for g in memory]
-    current = header["basis"].get("current", home)
-    if current not in names or not np.allclose(memory[names.index(current)].coefficients, in_use):
-        # a last layer that is none of the grounds (edited, or a future format): its own
-        memory = (*memory, Ground("start", in_use.copy(), False))
-        current = "start"
     far = np.asarray(header["basis"].get("far_moment") or np.zeros((n + 1, n + 1)))
-    index = names.index(current) if current in names else len(memory) - 1
     offset = float(base.normaliser.y_mean[Z] / base.normaliser.y_std[Z])
-    state = initial_state(memory, index, others, config, far, offset)
+    state = initial_state(memory, names.index(home), others, config, far, offset)
     learnt = sum(1 for g in memory if g.name.startswith("learnt-"))
     return replace(state, learnt=learnt)
+
+
+def starts_elsewhere(base: GroundEffectNet, state: CompositeState) -> bool:
+    """Whether the file's last layer holds another ground than the one the flight starts on."""
+    in_use = np.concatenate([base.weights[-1][Z], base.biases[-1][Z : Z + 1]])
+    return not np.array_equal(in_use, state.published)
 
 
 def basis_values(weights: Arrays, biases: Arrays, x: np.ndarray) -> np.ndarray:

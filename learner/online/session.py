@@ -92,6 +92,8 @@ class OnlineSession:
             )
             if self._composite is None:
                 self._composite = composite_session.start_state(self.base, self._composite_config)
+                if composite_session.starts_elsewhere(self.base, self._composite):
+                    self._publish_composite(0.0, None)  # the home ground, before take-off
         if self._holdout.maxlen != settings.holdout_size:
             self._holdout = collections.deque(self._holdout, maxlen=settings.holdout_size)
         a = self._anchor
@@ -188,6 +190,10 @@ class OnlineSession:
         weights, biases = tuple(s.net.weights), tuple(s.net.biases)
         self.counts["updates"] += 1
         self.last_loss = float(np.mean((forward_np(weights, biases, bx) - by) ** 2))
+        # the tracking term only near the surface: far from it a hold's error is not the
+        # ground's doing (and every ground agrees there)
+        height_m = bx[:, 0] * self._x_std[0] + self._x_mean[0]
+        bs = np.where(height_m < self.settings.composite_tracking_below_m, bs, 0.0)
         with np.errstate(all="ignore"):
             state, decision = composite_session.step(
                 self._composite, weights, biases, bx, by, bs, self._composite_config
@@ -199,8 +205,14 @@ class OnlineSession:
         self.counts[decision.kind] += 1
         if decision.kind == "held":
             return None
-        layer = composite_session.with_coefficients(weights, biases, state.published)
         self.counts["accepted"] += 1
+        return self._publish_composite(t_s, self.last_loss)
+
+    def _publish_composite(self, t_s: float, loss: float | None) -> Snapshot:
+        assert self._composite is not None
+        s = self.snapshot
+        weights, biases = tuple(s.net.weights), tuple(s.net.biases)
+        layer = composite_session.with_coefficients(weights, biases, self._composite.published)
         self.snapshot = make_snapshot(
             s.version + 1,
             layer.weights,
@@ -208,7 +220,7 @@ class OnlineSession:
             self.base.normaliser,
             self.adapted_header(),
             t_s,
-            self.last_loss,
+            loss,
         )
         return self.snapshot
 

@@ -83,6 +83,13 @@ class OnlineSettings:
     composite_tracking_n_s_m: float = param(
         0.1, unit="N s/m", lo=0.0, hi=10.0, doc="composite: force per m/s of tracking error"
     )
+    composite_tracking_below_m: float = param(
+        0.25,
+        unit="m",
+        lo=0.0,
+        hi=100.0,
+        doc="composite: the tracking term only this near the surface",
+    )
     composite_confidence: float = param(
         30.0, lo=0.0, hi=1e6, doc="composite: likelihood ratio a change must exceed"
     )
