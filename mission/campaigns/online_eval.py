@@ -88,7 +88,24 @@ def hold_error(
     *extra: str,
     flight_log: Path | None = None,
 ) -> float:
-    summary = fly(
+    summary = flight_summary(
+        mission, start, world, model, rho, network, *extra, flight_log=flight_log
+    )
+    # a trial that never held near the ground counts as the whole hold height, not as perfect
+    return _hold(summary)
+
+
+def flight_summary(
+    mission: Path,
+    start: str,
+    world: Path,
+    model: str,
+    rho: float,
+    network: str | None,
+    *extra: str,
+    flight_log: Path | None = None,
+) -> dict[str, Any]:
+    return fly(
         mission,
         str(world),
         model,
@@ -101,9 +118,6 @@ def hold_error(
         flight_log=flight_log,
         autopilot_options=extra,
     )
-    error = summary.get("hold_z_rms_error_m")
-    # a trial that never held near the ground counts as the whole hold height, not as perfect
-    return float(error) if error is not None else 0.03
 
 
 def far_error_n(flight_log: Path, network: str | Path, world: Path, rho: float) -> float:
@@ -168,6 +182,9 @@ def run_online_eval(
     def errors_of(calls: Sequence[tuple[Any, ...]]) -> np.ndarray:
         return np.array(list(pool.map(lambda c: hold_error(*c, *control), calls)))
 
+    def summaries_of(calls: Sequence[tuple[Any, ...]]) -> list[dict[str, Any]]:
+        return list(pool.map(lambda c: flight_summary(*c, *control), calls))
+
     def logged_errors_of(calls: Sequence[tuple[tuple[Any, ...], Path]]) -> np.ndarray:
         return np.array(
             list(pool.map(lambda c: hold_error(*c[0], *control, flight_log=c[1]), calls))
@@ -213,7 +230,16 @@ def run_online_eval(
             }
         if remember and 2.0 in rhos:
             results["remember"] = _remember(
-                d, trials, methods, network, adapted, say, errors_of, logged_errors_of, extra
+                d,
+                trials,
+                methods,
+                network,
+                adapted,
+                say,
+                errors_of,
+                logged_errors_of,
+                extra,
+                summaries_of,
             )
     return results
 
@@ -228,6 +254,7 @@ def _remember(
     errors_of: Callable[[Sequence[tuple[Any, ...]]], np.ndarray],
     logged_errors_of: Callable[[Sequence[tuple[tuple[Any, ...], Path]]], np.ndarray],
     extra: tuple[str, ...] = (),
+    summaries_of: Callable[[Sequence[tuple[Any, ...]]], list[dict[str, Any]]] | None = None,
 ) -> dict[str, Any]:
     """4.4: back at rho = 1 with the networks adapted at rho = 2, learning off. Two errors
     against offline-only: the hold error of the network's own flight (near the ground rho 1
@@ -254,12 +281,24 @@ def _remember(
     for method in methods:
         # composite recalls a ground only with the method on; the others fly as adapted
         again = ("--online", method, *extra) if method in NEEDS_BASIS else ()
-        errors = errors_of(
-            [
-                (m, s, world, "neural", 1.0, str(path), *again)
-                for (m, s), path in zip(trials, adapted[method], strict=True)
-            ]
-        )
+        calls = [
+            (m, s, world, "neural", 1.0, str(path), *again)
+            for (m, s), path in zip(trials, adapted[method], strict=True)
+        ]
+        if again and summaries_of is not None:
+            # learning on: what the model predicted far from the ground in its own flight
+            summaries = summaries_of(calls)
+            errors = np.array([_hold(x) for x in summaries])
+            far_n = [x.get("ge_z_far_rms_error_n") for x in summaries]
+            out.setdefault("in_flight_far_error_n", {})[method] = far_n
+            mean, lo, hi = mean_ci95(np.array([f for f in far_n if f is not None]))
+            say(
+                f"rho_sim 1 again  {method:10s} its own flight's ground-effect error >= "
+                f"{FAR_FROM_GROUND_M:g} m {mean * 1000:7.2f} mN (95% CI {lo * 1000:.2f} to "
+                f"{hi * 1000:.2f})"
+            )
+        else:
+            errors = errors_of(calls)
         _say_row(say, "rho_sim 1 again", method, errors)
         out["forgetting_m"][method] = (errors - offline).tolist()
         out["far_error_n"][method] = [
@@ -288,6 +327,11 @@ def _remember(
         say(f"protecting methods that forget less than naive far from the ground: {_names(better)}")
         out["forget_less_far"] = better
     return out
+
+
+def _hold(summary: dict[str, Any]) -> float:
+    error = summary.get("hold_z_rms_error_m")
+    return float(error) if error is not None else 0.03  # never held: the whole hold height
 
 
 def _names(names: list[str]) -> str:
