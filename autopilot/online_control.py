@@ -58,6 +58,8 @@ def settings_from(params: ParamStore, base: Any = None) -> Any:
         forgetting=p.forgetting,
         rls_initial_covariance=p.rls_covariance,
         rls_scale_sd=p.rls_scale_sd,
+        composite_tracking_n_s_m=p.tracking,
+        composite_confidence=p.confidence,
     )
 
 
@@ -180,10 +182,16 @@ class OnlineControl:
             r = np.asarray(row)
             self.learner.submit(r[FEATURE_COLUMNS], r[TARGET_COLUMNS], float(r[0]), tracking_m_s)
 
-    def apply(self, model: GroundEffectModel) -> None:
-        """The current snapshot into the neural model: one reference read per step."""
+    def apply(self, model: GroundEffectModel) -> Any:
+        """The current snapshot into the neural model: one reference read per step. Returns
+        the network it replaced when the snapshot changed (else None)."""
         if self.active and self.learner is not None:
-            model.net = self.learner.snapshot.net  # type: ignore[attr-defined]
+            net = self.learner.snapshot.net
+            old = model.net  # type: ignore[attr-defined]
+            if net is not old:
+                model.net = net  # type: ignore[attr-defined]
+                return old
+        return None
 
     def close(self) -> dict[str, Any]:
         """Stop the learner, save the adapted model if asked; the summary's online part."""

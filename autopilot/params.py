@@ -84,6 +84,12 @@ class OnlineParams:
     rls_scale_sd: float = param(
         1.0, lo=0.0, hi=100.0, doc="RLS prior sd of a change of the effect's size"
     )
+    tracking: float = param(
+        0.1, lo=0.0, hi=10.0, doc="composite: force per m/s of tracking error, N s/m (0: off)"
+    )
+    confidence: float = param(
+        30.0, lo=0.0, hi=1e6, doc="composite: likelihood ratio a change must exceed"
+    )
     pause: int = param(0, lo=0, hi=1, doc="1: samples are ignored, the weights stay")
     reset: int = param(0, lo=0, hi=1, doc="1: back to the offline weights (then reads 0 again)")
 
@@ -136,6 +142,8 @@ NAMES: dict[str, tuple[str, str]] = {
     "GFX_OL_FORGET": ("online", "forgetting"),
     "GFX_OL_RLS_P0": ("online", "rls_covariance"),
     "GFX_OL_RLS_SC": ("online", "rls_scale_sd"),
+    "GFX_OL_TRACK": ("online", "tracking"),
+    "GFX_OL_CONF": ("online", "confidence"),
     "GFX_OL_PAUSE": ("online", "pause"),
     "GFX_OL_RESET": ("online", "reset"),
     "EKF2_EV_CTRL": ("estimator", "ev_ctrl"),

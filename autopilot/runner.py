@@ -20,11 +20,12 @@ import numpy as np
 
 from autopilot import requests
 from autopilot.commander import CommanderState, Phase, command
-from autopilot.controller import FlightState, control, integrate
+from autopilot.controller import FlightState, control, handover, integrate
 from autopilot.gcs_link import GcsLink
 from autopilot.ground_models import (
     GroundEffectInputs,
     GroundEffectModel,
+    NeuralGroundEffect,
     fixed_point_step,
     make_model,
 )
@@ -290,10 +291,16 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                     break
             if cmd.setpoint is not None:
                 t0 = time.perf_counter()
-                online.apply(tuning.model)
-                target = tuning.model.predict(
-                    GroundEffectInputs(height, state.velocity_m_s, state.quaternion, speeds)
-                )
+                replaced = online.apply(tuning.model)
+                inputs = GroundEffectInputs(height, state.velocity_m_s, state.quaternion, speeds)
+                target = tuning.model.predict(inputs)
+                if replaced is not None and tuning.controller.position_i > 0.0:
+                    # bumpless: the new model takes over what the integral held of it
+                    old = NeuralGroundEffect(replaced).predict(inputs)
+                    m = vehicle.mass_kg
+                    change = ((target[0] - old[0]) / m, (target[1] - old[1]) / m,
+                              (target[2] - old[2]) / m)  # fmt: skip
+                    integral = handover(integral, change)
                 rotor_thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in speeds)
                 ge = fixed_point_step(ge, target, rotor_thrust)
                 output = control(state, cmd.setpoint, ge, vehicle, tuning.controller, integral)
