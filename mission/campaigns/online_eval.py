@@ -61,6 +61,8 @@ SAME_M = 1e-5  # 0.01 mm: hold errors closer than this are the same
 # cushion its model mispredicts can take minutes to land on the thesis's PD: flights end
 # this long after the hold's nominal end.
 FLIGHT_S_AFTER_HOLD = 35.0
+LINK_LOST = "lost the simulator link"  # autopilot/runner.py's words, as the experiments' runner
+LINK_RETRIES = 2
 BASIS_NETWORK = "grounds"  # the packaged basis model (learner/basis.py)
 CONTROLLERS: dict[str, tuple[str, ...]] = {
     "thesis": ("GFX_POS_P=1", "GFX_POS_D=2", "GFX_POS_I=0"),  # the thesis's PD (3.7)
@@ -114,19 +116,26 @@ def flight_summary(
     *extra: str,
     flight_log: Path | None = None,
 ) -> dict[str, Any]:
-    return fly(
-        mission,
-        str(world),
-        model,
-        rho=rho,
-        start=start,
-        network=network,
-        via_gcs=False,
-        record=False,
-        max_flight_s=max_flight_s(mission),
-        flight_log=flight_log,
-        autopilot_options=extra,
-    )
+    """One seeded flight's summary. A flight whose simulator link was lost (a machine so
+    loaded that a process went a second without a step) is flown again, as the experiments'
+    runner does: lockstep makes the retry the same flight."""
+    for _ in range(LINK_RETRIES + 1):
+        summary = fly(
+            mission,
+            str(world),
+            model,
+            rho=rho,
+            start=start,
+            network=network,
+            via_gcs=False,
+            record=False,
+            max_flight_s=max_flight_s(mission),
+            flight_log=flight_log,
+            autopilot_options=extra,
+        )
+        if not str(summary.get("ended", "")).startswith(LINK_LOST):
+            break
+    return summary
 
 
 def far_error_n(flight_log: Path, network: str | Path, world: Path, rho: float) -> float:
