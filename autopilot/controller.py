@@ -118,6 +118,26 @@ def integrate(
     )
 
 
+def handover(integral_m_s2: Vec3, change_m_s2: Vec3) -> Vec3:
+    """The integral after the ground-effect model changed by `change_m_s2` (its new minus its
+    old prediction at the current state, over the mass): the model takes over the part of
+    the integral it now explains, and no more (per axis: towards zero, never past it), so
+    that a model learnt in flight does not step the command while the integral unwinds
+    what the model now does (bumpless transfer)."""
+
+    def axis(i: float, d: float) -> float:
+        if i * d >= 0.0:  # the change is not what the integral held
+            return i
+        n = i + d
+        return n if n * i > 0.0 else 0.0
+
+    return (
+        axis(integral_m_s2[0], change_m_s2[0]),
+        axis(integral_m_s2[1], change_m_s2[1]),
+        axis(integral_m_s2[2], change_m_s2[2]),
+    )
+
+
 def control(
     state: FlightState,
     setpoint: Setpoint,

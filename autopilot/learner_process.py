@@ -14,7 +14,8 @@ Protocol over one duplex pipe (pickled tuples). Parent to learner: ("samples", r
 ("reset", t_s), ("configure", settings), ("close",). Learner to parent: ("ready",),
 ("snapshot", version, weights, biases, t_s, loss), ("rejected", t_s, loss), ("reset",
 version, t_s), ("error", text) and, last, ("summary", counts, reject_reasons, last_loss).
-A row is t, the 12 features, the 3 targets. The count of samples taken off the pipe is a
+A row is t, the 12 features, the 3 targets, the position loop's vertical composite error
+(`composite`'s tracking term). The count of samples taken off the pipe is a
 shared integer (`taken`), which the loop's side reads to bound the queue without a message
 per chunk.
 """
@@ -26,8 +27,8 @@ import os
 from multiprocessing.connection import Connection
 from typing import Any
 
-ROW_TIME, ROW_FEATURES, ROW_TARGETS = 0, slice(1, 13), slice(13, 16)
-ROW_WIDTH = 16
+ROW_TIME, ROW_FEATURES, ROW_TARGETS, ROW_TRACKING = 0, slice(1, 13), slice(13, 16), 16
+ROW_WIDTH = 17
 NICE = 15  # low: the loop and the simulator first; on its own core it still keeps up
 
 
@@ -49,6 +50,9 @@ def learner_main(
         conn.send(("error", f"learner did not start: {err}"))
         conn.send(("summary", {}, {}, None))
         return
+    if session.snapshot.version > 0:  # composite starts on its home ground: publish it
+        net = session.snapshot.net
+        conn.send(("snapshot", 1, net.weights, net.biases, 0.0, None, net.header.get("basis")))
     conn.send(("ready",))
     while True:
         try:
@@ -60,15 +64,27 @@ def learner_main(
             rows = message[1]
             taken.value += len(rows)  # shared memory: no message, no wake-up of the loop's side
             events = session.add_many(
-                rows[:, ROW_FEATURES], rows[:, ROW_TARGETS], rows[:, ROW_TIME]
+                rows[:, ROW_FEATURES],
+                rows[:, ROW_TARGETS],
+                rows[:, ROW_TIME],
+                rows[:, ROW_TRACKING],
             )
             for t_s, snapshot, loss in events:
                 if snapshot is None:
                     conn.send(("rejected", t_s, loss))
                 else:
                     net = snapshot.net
+                    basis = net.header.get("basis")  # composite: the grounds, for --save-model
                     conn.send(
-                        ("snapshot", snapshot.version, net.weights, net.biases, t_s, snapshot.loss)
+                        (
+                            "snapshot",
+                            snapshot.version,
+                            net.weights,
+                            net.biases,
+                            t_s,
+                            snapshot.loss,
+                            basis,
+                        )
                     )
         elif kind == "reset":
             snapshot = session.reset(message[1])

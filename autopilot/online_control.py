@@ -20,7 +20,7 @@ from autopilot.ground_models import GroundEffectModel, default_network
 from autopilot.params import ONLINE_METHODS, ParamStore
 from learner.dataset import COLUMNS, FEATURES, TARGETS
 from learner.online.memory import Memory, load_memory, memory_path_for, offline_path_for
-from learner.online.names import NEEDS_MEMORY
+from learner.online.names import NEEDS_BASIS, NEEDS_MEMORY
 from simbridge.config import ConfigError
 
 # torch, and the learner with it, load only when learning is on: a flight without it
@@ -58,6 +58,8 @@ def settings_from(params: ParamStore, base: Any = None) -> Any:
         forgetting=p.forgetting,
         rls_initial_covariance=p.rls_covariance,
         rls_scale_sd=p.rls_scale_sd,
+        composite_tracking_n_s_m=p.tracking,
+        composite_confidence=p.confidence,
     )
 
 
@@ -85,6 +87,22 @@ def find_offline(network: str | Path | None, rho: float, net: Any) -> Any:
     return load_model(path)
 
 
+HOLDING_M_S = 1e-3  # a setpoint moving slower than this holds still
+
+
+def vertical_tracking_error(state: Any, setpoint: Any) -> float:
+    """The position loop's vertical composite error s = (v_z - v_dz) + Lambda (z - z_d) [m/s]
+    (Neural-Fly's s, Lambda 1/s), for `composite`'s tracking term; 0 without a setpoint or
+    while it moves: a slow position loop lags a moving setpoint by centimetres, which is the
+    loop's doing, not the model's (only a held setpoint's error is a model error)."""
+    if setpoint is None or max(abs(v) for v in setpoint.velocity_m_s) > HOLDING_M_S:
+        return 0.0
+    from learner.online.composite_session import LAMBDA_PER_S
+
+    dz = state.position_m[2] - setpoint.position_m[2]
+    return (state.velocity_m_s[2] - setpoint.velocity_m_s[2]) + LAMBDA_PER_S * dz
+
+
 class OnlineControl:
     def __init__(
         self, options: OnlineOptions, params: ParamStore, network: str | Path | None
@@ -108,7 +126,13 @@ class OnlineControl:
             from learner.model import load_model
 
             rho = params.model()[1]
-            find_offline(network, rho, load_model(network or default_network(rho)))
+            net = load_model(network or default_network(rho))
+            find_offline(network, rho, net)
+            if settings.method in NEEDS_BASIS and not net.header.get("basis"):
+                raise ConfigError(
+                    f"--online {settings.method}: needs a model trained over several grounds "
+                    "(--network grounds; make one with groundfx learn basis)"
+                )
 
     @property
     def sample_hz(self) -> float:
@@ -152,15 +176,22 @@ class OnlineControl:
         if self.learner is not None and not self.learner.wait_ready():
             self.errors.append("the learner process was not up within a minute of the start")
 
-    def submit(self, row: tuple[float, ...]) -> None:
+    def submit(self, row: tuple[float, ...], tracking_m_s: float = 0.0) -> None:
+        """A learning sample, with the position loop's vertical composite error [m/s]."""
         if self.active and self.learner is not None:
             r = np.asarray(row)
-            self.learner.submit(r[FEATURE_COLUMNS], r[TARGET_COLUMNS], float(r[0]))
+            self.learner.submit(r[FEATURE_COLUMNS], r[TARGET_COLUMNS], float(r[0]), tracking_m_s)
 
-    def apply(self, model: GroundEffectModel) -> None:
-        """The current snapshot into the neural model: one reference read per step."""
+    def apply(self, model: GroundEffectModel) -> Any:
+        """The current snapshot into the neural model: one reference read per step. Returns
+        the network it replaced when the snapshot changed (else None)."""
         if self.active and self.learner is not None:
-            model.net = self.learner.snapshot.net  # type: ignore[attr-defined]
+            net = self.learner.snapshot.net
+            old = model.net  # type: ignore[attr-defined]
+            if net is not old:
+                model.net = net  # type: ignore[attr-defined]
+                return old
+        return None
 
     def close(self) -> dict[str, Any]:
         """Stop the learner, save the adapted model if asked; the summary's online part."""

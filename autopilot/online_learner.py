@@ -31,6 +31,7 @@ from autopilot.learner_process import (
     ROW_FEATURES,
     ROW_TARGETS,
     ROW_TIME,
+    ROW_TRACKING,
     ROW_WIDTH,
     learner_main,
 )
@@ -73,6 +74,7 @@ class OnlineLearner:
         if deterministic:
             self.session = OnlineSession(base, settings, memory, offline)
             self.session.warm_up()  # not in the first update of the flight
+            self.snapshot = self.session.snapshot  # composite: its home ground
             return
         self._queue_size = queue_size
         self._chunk_samples = max(1, min(CHUNK_SAMPLES, queue_size))
@@ -97,17 +99,20 @@ class OnlineLearner:
 
     # --- the control loop's side: never waits ---------------------------------------------
 
-    def submit(self, features: np.ndarray, target_n: np.ndarray, t_s: float) -> None:
+    def submit(
+        self, features: np.ndarray, target_n: np.ndarray, t_s: float, tracking_m_s: float = 0.0
+    ) -> None:
         if self.paused:
             self.ignored_paused += 1
             return
         if self.session is not None:
-            self._learn(features, target_n, t_s)
+            self._learn(features, target_n, t_s, tracking_m_s)
             return
         row = self._chunk[self._filled]
         row[ROW_TIME] = t_s
         row[ROW_FEATURES] = features
         row[ROW_TARGETS] = target_n
+        row[ROW_TRACKING] = tracking_m_s
         self._filled += 1
         if self._filled == self._chunk_samples:
             self._flush()
@@ -180,8 +185,10 @@ class OnlineLearner:
                 return
             kind = message[0]
             if kind == "snapshot":
-                _, version, weights, biases, t_s, loss = message
+                _, version, weights, biases, t_s, loss, basis = message
                 header = adapted_header(self.base.header, self.settings, version, {})
+                if basis is not None:
+                    header["basis"] = basis
                 self._publish(
                     make_snapshot(version, weights, biases, self.base.normaliser, header, t_s, loss)
                 )
@@ -201,10 +208,12 @@ class OnlineLearner:
 
     # --- both modes ------------------------------------------------------------------------
 
-    def _learn(self, features: np.ndarray, target_n: np.ndarray, t_s: float) -> None:
+    def _learn(
+        self, features: np.ndarray, target_n: np.ndarray, t_s: float, tracking_m_s: float
+    ) -> None:
         assert self.session is not None
         updates = self.session.counts["updates"]
-        snapshot = self.session.add(features, target_n, t_s)
+        snapshot = self.session.add(features, target_n, t_s, tracking_m_s)
         if snapshot is not None:
             self._publish(snapshot)
         elif self.session.counts["updates"] != updates and self.on_report is not None:
@@ -240,10 +249,25 @@ class OnlineLearner:
             "online_ignored_paused": self.ignored_paused,
             "online_outliers": c.get("outliers", 0),
             "online_resets": c.get("resets", 0),
+            **self._composite_summary(c),
             "online_loss_first": self.losses[0][1] if self.losses else None,
             "online_loss_last": last_loss,
             "online_errors": self.errors,
             "online_settings": asdict(self.settings),
+        }
+
+    def _composite_summary(self, counts: dict[str, int]) -> dict[str, Any]:
+        """`composite`: how often the confidence test held, adapted or recalled a ground,
+        and the ground in use at the end."""
+        if self.settings.method != "composite":
+            return {}
+        basis = self.snapshot.net.header.get("basis") or {}
+        return {
+            "online_held": counts.get("held", 0),
+            "online_adapted": counts.get("adapted", 0),
+            "online_recalled": counts.get("recalled", 0),
+            "online_ground": basis.get("current", basis.get("home")),
+            "online_grounds": [basis.get("home")] + [g["name"] for g in basis.get("learnt") or []],
         }
 
     def save(self, path: Path) -> Path:
@@ -256,6 +280,8 @@ class OnlineLearner:
         header = adapted_header(
             self.base.header, self.settings, self.snapshot.version, self._counts()[0]
         )
+        if "basis" in net.header:  # composite: the grounds it knows now
+            header["basis"] = net.header["basis"]
         out = save_model(path, GroundEffectNet(net.weights, net.biases, net.normaliser, header))
         save_model(offline_path_for(out), self.offline)
         source = self.memory.header.get("path") if self.memory else None

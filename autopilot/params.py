@@ -61,7 +61,7 @@ class ModelParams:
     rho: float = param(1.0, lo=0.01, hi=50.0, doc="rho of the analytic model (equation 3.4)")
 
 
-ONLINE_METHODS = ("off", "naive", "constraint", "margin", "ewc", "replay", "rls")
+ONLINE_METHODS = ("off", "naive", "constraint", "margin", "ewc", "replay", "rls", "composite")
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,10 @@ class OnlineParams:
     """The online learner (learner/online/settings.py has the rest of its settings)."""
 
     method: int = param(
-        0, lo=0, hi=6, doc="0 off, 1 naive, 2 constraint, 3 margin, 4 ewc, 5 replay, 6 rls"
+        0,
+        lo=0,
+        hi=7,
+        doc="0 off, 1 naive, 2 constraint, 3 margin, 4 ewc, 5 replay, 6 rls, 7 composite",
     )
     learning_rate: float = param(1e-3, lo=1e-7, hi=1.0, doc="Adam step size")
     penalty: float = param(1.0, lo=0.0, hi=1e6, doc="lambda of constraint, margin, ewc")
@@ -80,6 +83,12 @@ class OnlineParams:
     )
     rls_scale_sd: float = param(
         1.0, lo=0.0, hi=100.0, doc="RLS prior sd of a change of the effect's size"
+    )
+    tracking: float = param(
+        0.1, lo=0.0, hi=10.0, doc="composite: force per m/s of tracking error, N s/m (0: off)"
+    )
+    confidence: float = param(
+        30.0, lo=0.0, hi=1e6, doc="composite: likelihood ratio a change must exceed"
     )
     pause: int = param(0, lo=0, hi=1, doc="1: samples are ignored, the weights stay")
     reset: int = param(0, lo=0, hi=1, doc="1: back to the offline weights (then reads 0 again)")
@@ -133,6 +142,8 @@ NAMES: dict[str, tuple[str, str]] = {
     "GFX_OL_FORGET": ("online", "forgetting"),
     "GFX_OL_RLS_P0": ("online", "rls_covariance"),
     "GFX_OL_RLS_SC": ("online", "rls_scale_sd"),
+    "GFX_OL_TRACK": ("online", "tracking"),
+    "GFX_OL_CONF": ("online", "confidence"),
     "GFX_OL_PAUSE": ("online", "pause"),
     "GFX_OL_RESET": ("online", "reset"),
     "EKF2_EV_CTRL": ("estimator", "ev_ctrl"),

@@ -20,11 +20,12 @@ import numpy as np
 
 from autopilot import requests
 from autopilot.commander import CommanderState, Phase, command
-from autopilot.controller import FlightState, control, integrate
+from autopilot.controller import FlightState, control, handover, integrate
 from autopilot.gcs_link import GcsLink
 from autopilot.ground_models import (
     GroundEffectInputs,
     GroundEffectModel,
+    NeuralGroundEffect,
     fixed_point_step,
     make_model,
 )
@@ -36,7 +37,7 @@ from autopilot.mission_items import MissionItem
 from autopilot.modes import FlightMode
 from autopilot.nav_metrics import estimation_error, estimator_metrics
 from autopilot.navigation import Navigation
-from autopilot.online_control import OnlineControl, OnlineOptions
+from autopilot.online_control import OnlineControl, OnlineOptions, vertical_tracking_error
 from autopilot.params import ParamStore
 from autopilot.record_options import RecordOptions
 from autopilot.recorder import open_recorder
@@ -266,10 +267,16 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             applied = speeds  # the rotor speeds of the interval that ended at t
             if cmd.setpoint is not None:
                 t0 = time.perf_counter()
-                online.apply(tuning.model)
-                target = tuning.model.predict(
-                    GroundEffectInputs(height, state.velocity_m_s, state.quaternion, speeds)
-                )
+                replaced = online.apply(tuning.model)
+                inputs = GroundEffectInputs(height, state.velocity_m_s, state.quaternion, speeds)
+                target = tuning.model.predict(inputs)
+                if replaced is not None and tuning.controller.position_i > 0.0:
+                    # bumpless: the new model takes over what the integral held of it
+                    old = NeuralGroundEffect(replaced).predict(inputs)
+                    m = vehicle.mass_kg
+                    change = ((target[0] - old[0]) / m, (target[1] - old[1]) / m,
+                              (target[2] - old[2]) / m)  # fmt: skip
+                    integral = handover(integral, change)
                 rotor_thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in speeds)
                 ge = fixed_point_step(ge, target, rotor_thrust)
                 output = control(state, cmd.setpoint, ge, vehicle, tuning.controller, integral)
@@ -320,7 +327,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 row = learning_sample(
                     t, step, state, height, applied, vehicle, nav.accel_bias_m_s2()
                 )
-                online.submit(row)
+                online.submit(row, vertical_tracking_error(state, cmd.setpoint))
                 if config.record_hz > 0.0:
                     samples.append(row)
                 period = 1.0 / sample_hz  # on a 100 Hz schedule, 250 Hz steps

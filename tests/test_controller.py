@@ -6,7 +6,14 @@ import math
 
 import pytest
 
-from autopilot.controller import ControllerParams, FlightState, Setpoint, control, integrate
+from autopilot.controller import (
+    ControllerParams,
+    FlightState,
+    Setpoint,
+    control,
+    handover,
+    integrate,
+)
 from autopilot.ground_models import (
     AnalyticGroundEffect,
     GroundEffectInputs,
@@ -151,3 +158,12 @@ def test_a_saturated_command_is_flagged_so_that_the_integral_does_not_wind_up():
     near = Setpoint((0.0, 0.0, 1.01))
     out = control(LEVEL, near, (0.0, 0.0, 0.0), V, ControllerParams())
     assert not out.saturated and out.pd_acceleration_m_s2[2] == pytest.approx(0.06)
+
+
+def test_a_new_model_takes_over_what_the_integral_held_and_no_more():
+    """Bumpless transfer: the integral held -0.03 m/s^2 of a ground effect the old model
+    missed; a model that now predicts 0.02 of it leaves -0.01, one that predicts more than
+    the integral held leaves 0 (never past it), a change the other way leaves it alone."""
+    assert handover((0.0, 0.0, -0.03), (0.0, 0.0, 0.02)) == pytest.approx((0.0, 0.0, -0.01))
+    assert handover((0.0, 0.0, -0.03), (0.0, 0.0, 0.05)) == (0.0, 0.0, 0.0)
+    assert handover((0.01, 0.0, -0.03), (0.02, 0.0, -0.01)) == (0.01, 0.0, -0.03)

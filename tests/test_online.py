@@ -17,8 +17,9 @@ from learner.network import CONTROL_COLUMNS
 from learner.online.guards import check_update
 from learner.online.memory import load_memory
 from learner.online.methods import Anchor, forward_np, update
+from learner.online.names import NETWORK_METHODS
 from learner.online.session import OnlineSession
-from learner.online.settings import METHODS, OnlineSettings
+from learner.online.settings import OnlineSettings
 from simbridge.config import ConfigError
 from tests.helpers import REPO, run_groundfx
 
@@ -51,7 +52,7 @@ def anchor(settings: OnlineSettings) -> Anchor:
     return session._anchor
 
 
-@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("method", NETWORK_METHODS)
 def test_every_method_learns_a_shift_and_keeps_the_lipschitz_bound(method):
     x, y = standardised(*shifted_batch())
     w, b = tuple(BASE.weights), tuple(BASE.biases)
@@ -224,7 +225,7 @@ def test_online_parameters_have_ranges_and_the_options_clear_errors(tmp_path):
     assert "GFX_OL_FORGET: 1.5 is outside the allowed range [0.5, 1]" in (
         check_value("GFX_OL_FORGET", 1.5) or ""
     )
-    assert check_value("GFX_OL_METHOD", 7) is not None
+    assert check_value("GFX_OL_METHOD", 8) is not None  # 7: composite, the last
     store = ParamStore(None, {"GFX_OL_METHOD": 6, "GFX_OL_FORGET": 0.9})
     assert store.online().method == 6 and store.online().forgetting == pytest.approx(0.9)
     with pytest.raises(ConfigError, match="online steps: 0 is outside the allowed range"):
@@ -254,6 +255,9 @@ def test_online_parameters_have_ranges_and_the_options_clear_errors(tmp_path):
         return r.stderr
 
     assert "--online ewc: needs stored offline samples" in refusal("rho2", "ewc")
+    assert "--online composite: needs a model trained over several grounds" in refusal(
+        "rho1", "composite"
+    )
     adapted = OnlineLearner(BASE, OnlineSettings()).save(tmp_path / "adapted.npz")
     (tmp_path / "adapted.offline.npz").unlink()
     assert "adapted.offline.npz is missing" in refusal(str(adapted), "constraint")

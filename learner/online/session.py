@@ -18,10 +18,12 @@ import numpy as np
 from learner.bounds import DEFAULT_LAYER_BOUND
 from learner.dataset import inliers
 from learner.model import GroundEffectNet
+from learner.online import composite_session
+from learner.online.composite import CompositeState, grounds_to_header
 from learner.online.guards import check_update
 from learner.online.memory import Memory
-from learner.online.methods import Anchor, RlsState, diagonal_fisher, update
-from learner.online.settings import NEEDS_MEMORY, OnlineSettings
+from learner.online.methods import Anchor, RlsState, diagonal_fisher, forward_np, update
+from learner.online.settings import NEEDS_BASIS, NEEDS_MEMORY, OnlineSettings
 from learner.online.snapshot import Snapshot, make_snapshot
 from simbridge.config import ConfigError
 
@@ -60,6 +62,9 @@ class OnlineSession:
         self.snapshot = Snapshot(0, base, 0.0)
         self._x: list[np.ndarray] = []
         self._y: list[np.ndarray] = []
+        self._s: list[float] = []  # the tracking error of each sample (composite)
+        self._composite: CompositeState | None = None
+        self.last_decision = ""
         self._holdout: collections.deque[tuple[np.ndarray, np.ndarray]] = collections.deque(
             maxlen=settings.holdout_size
         )
@@ -80,6 +85,15 @@ class OnlineSession:
         if settings.method != self.settings.method:
             self._rls = None
         self.settings = settings
+        if settings.method in NEEDS_BASIS:
+            layer_bound = self._anchor.layer_bound
+            self._composite_config = composite_session.composite_config(
+                settings, self.target_scale_n, layer_bound
+            )
+            if self._composite is None:
+                self._composite = composite_session.start_state(self.base, self._composite_config)
+                if composite_session.starts_elsewhere(self.base, self._composite):
+                    self._publish_composite(0.0, None)  # the home ground, before take-off
         if self._holdout.maxlen != settings.holdout_size:
             self._holdout = collections.deque(self._holdout, maxlen=settings.holdout_size)
         a = self._anchor
@@ -101,22 +115,34 @@ class OnlineSession:
         x, y = np.zeros((n, len(self._x_mean))), np.zeros((n, len(self._y_mean)))
         weights, biases = tuple(self.base.weights), tuple(self.base.biases)
         with np.errstate(all="ignore"):
-            update(weights, biases, x, y, self.settings, self._anchor, None, 0)
+            if self._composite is not None:
+                composite_session.step(
+                    self._composite, weights, biases, x, y, np.zeros(n), self._composite_config
+                )
+            else:
+                update(weights, biases, x, y, self.settings, self._anchor, None, 0)
 
     def _standardise(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return (x - self._x_mean) / self._x_std, (y - self._y_mean) / self._y_std
 
-    def add(self, features: np.ndarray, target_n: np.ndarray, t_s: float) -> Snapshot | None:
-        """One sample (12 features, f_ge of equation 3.16 [N]); the new snapshot if this
-        sample completed a batch whose update was accepted."""
+    def add(
+        self, features: np.ndarray, target_n: np.ndarray, t_s: float, tracking_m_s: float = 0.0
+    ) -> Snapshot | None:
+        """One sample (12 features, f_ge of equation 3.16 [N], the position loop's vertical
+        composite error [m/s]); the new snapshot if this sample completed a batch whose
+        update was accepted."""
         x, y = np.asarray(features, float), np.asarray(target_n, float)
         if not inliers(x[None, :], y[None, :])[0]:
             self.counts["outliers"] += 1  # as offline training drops them (thesis 3.5.2)
             return None
-        return self._take(*self._standardise(x, y), t_s)
+        return self._take(*self._standardise(x, y), t_s, float(tracking_m_s))
 
     def add_many(
-        self, features: np.ndarray, targets_n: np.ndarray, times_s: np.ndarray
+        self,
+        features: np.ndarray,
+        targets_n: np.ndarray,
+        times_s: np.ndarray,
+        tracking_m_s: np.ndarray | None = None,
     ) -> list[tuple[float, Snapshot | None, float | None]]:
         """Samples in a block (rows as `add` takes them), with the same result as adding
         them one by one; for every update they triggered: (time, the new snapshot or None
@@ -124,15 +150,18 @@ class OnlineSession:
         good = inliers(features, targets_n)
         self.counts["outliers"] += int(np.count_nonzero(~good))
         xs, ys = self._standardise(features[good], targets_n[good])
+        track = np.zeros(len(times_s)) if tracking_m_s is None else tracking_m_s
         events: list[tuple[float, Snapshot | None, float | None]] = []
-        for x, y, t_s in zip(xs, ys, times_s[good], strict=True):
+        for x, y, t_s, s_m_s in zip(xs, ys, times_s[good], track[good], strict=True):
             updates = self.counts["updates"]
-            snapshot = self._take(x, y, float(t_s))
+            snapshot = self._take(x, y, float(t_s), float(s_m_s))
             if self.counts["updates"] != updates:
                 events.append((float(t_s), snapshot, self.last_loss))
         return events
 
-    def _take(self, x: np.ndarray, y: np.ndarray, t_s: float) -> Snapshot | None:
+    def _take(
+        self, x: np.ndarray, y: np.ndarray, t_s: float, tracking_m_s: float = 0.0
+    ) -> Snapshot | None:
         """A standardised sample: to the guard's buffer or the batch; the update when full."""
         self._seen += 1
         self.counts["samples"] += 1
@@ -141,11 +170,59 @@ class OnlineSession:
             return None
         self._x.append(x)
         self._y.append(y)
-        if len(self._x) < self.settings.batch_size:
+        self._s.append(tracking_m_s)
+        batch = self.settings.composite_batch if self._composite else self.settings.batch_size
+        if len(self._x) < batch:
             return None
-        bx, by = np.array(self._x), np.array(self._y)
-        self._x, self._y = [], []
+        bx, by, bs = np.array(self._x), np.array(self._y), np.array(self._s)
+        self._x, self._y, self._s = [], [], []
+        if self._composite is not None:
+            return self._composite_update(bx, by, bs, t_s)
         return self._update(bx, by, t_s)
+
+    def _composite_update(
+        self, bx: np.ndarray, by: np.ndarray, bs: np.ndarray, t_s: float
+    ) -> Snapshot | None:
+        """`composite`: the estimate always moves; a snapshot only when the confidence test
+        publishes a change (adapted, or a ground recalled)."""
+        assert self._composite is not None
+        s = self.snapshot
+        weights, biases = tuple(s.net.weights), tuple(s.net.biases)
+        self.counts["updates"] += 1
+        self.last_loss = float(np.mean((forward_np(weights, biases, bx) - by) ** 2))
+        # the tracking term only near the surface: far from it a hold's error is not the
+        # ground's doing (and every ground agrees there)
+        height_m = bx[:, 0] * self._x_std[0] + self._x_mean[0]
+        bs = np.where(height_m < self.settings.composite_tracking_below_m, bs, 0.0)
+        with np.errstate(all="ignore"):
+            state, decision = composite_session.step(
+                self._composite, weights, biases, bx, by, bs, self._composite_config
+            )
+        if not np.all(np.isfinite(state.estimate)) or not np.all(np.isfinite(state.covariance)):
+            return self._reject("non-finite estimate")
+        self._composite = state
+        self.last_decision = decision.kind
+        self.counts[decision.kind] += 1
+        if decision.kind == "held":
+            return None
+        self.counts["accepted"] += 1
+        return self._publish_composite(t_s, self.last_loss)
+
+    def _publish_composite(self, t_s: float, loss: float | None) -> Snapshot:
+        assert self._composite is not None
+        s = self.snapshot
+        weights, biases = tuple(s.net.weights), tuple(s.net.biases)
+        layer = composite_session.with_coefficients(weights, biases, self._composite.published)
+        self.snapshot = make_snapshot(
+            s.version + 1,
+            layer.weights,
+            layer.biases,
+            self.base.normaliser,
+            self.adapted_header(),
+            t_s,
+            loss,
+        )
+        return self.snapshot
 
     def _update(self, bx: np.ndarray, by: np.ndarray, t_s: float) -> Snapshot | None:
         s = self.snapshot
@@ -188,16 +265,19 @@ class OnlineSession:
     def reset(self, t_s: float) -> Snapshot:
         """Back to the offline weights (a new version, so readers see the change); the RLS
         prior is built again from them."""
-        self._x, self._y = [], []
+        self._x, self._y, self._s = [], [], []
         self._holdout.clear()
         self._rls = None
+        if self._composite is not None:
+            self._composite = composite_session.start_state(self.offline, self._composite_config)
         self.counts["resets"] += 1
         self.snapshot = Snapshot(self.snapshot.version + 1, self.offline, t_s)
         return self.snapshot
 
     def adapted_header(self) -> dict[str, Any]:
         """The model file's header for the current snapshot: where it came from, how."""
-        return adapted_header(self.base.header, self.settings, self.snapshot.version, self.counts)
+        header = adapted_header(self.base.header, self.settings, self.snapshot.version, self.counts)
+        return grounds_to_header(header, self._composite) if self._composite else header
 
 
 def adapted_header(

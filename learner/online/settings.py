@@ -5,7 +5,10 @@ penalty on the deviation of every weight from its offline value), `margin` (the 
 on the part of the deviation beyond a margin). Beyond the thesis: `ewc` (the deviation
 weighted by the diagonal Fisher information of the offline data, Kirkpatrick et al. 2017),
 `replay` (stored offline samples mixed into each batch) and `rls` (recursive least squares
-on the last layer with a forgetting factor, as Neural-Fly adapts its last layer).
+on the last layer with a forgetting factor, as Neural-Fly adapts its last layer) and
+`composite` (the coefficients of a basis learnt over several grounds, adapted by a Kalman
+filter with a tracking-error term, published only past a confidence test, with a memory of
+grounds; learner/online/composite.py).
 """
 
 from __future__ import annotations
@@ -13,10 +16,17 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from learner.online.names import METHODS, NEEDS_MEMORY, PROTECTING
+from learner.online.names import METHODS, NEEDS_BASIS, NEEDS_MEMORY, PROTECTING
 from simbridge.config import ConfigError, param, range_text
 
-__all__ = ["METHODS", "NEEDS_MEMORY", "PROTECTING", "OnlineSettings", "check_settings"]
+__all__ = [
+    "METHODS",
+    "NEEDS_BASIS",
+    "NEEDS_MEMORY",
+    "PROTECTING",
+    "OnlineSettings",
+    "check_settings",
+]
 
 
 @dataclass(frozen=True)
@@ -55,6 +65,48 @@ class OnlineSettings:
         5e-4, unit="N", lo=0.0, hi=10.0, doc="... plus this much (noise allowance)"
     )
     seed: int = param(0, lo=0, hi=2**31 - 1, doc="replay draws")
+    composite_noise_n: float = param(
+        2e-3, unit="N", lo=0.0, hi=1.0, lo_open=True, doc="composite: target noise sd (r)"
+    )
+    composite_prior_scale: float = param(
+        3.0, lo=0.0, hi=100.0, doc="composite: s, prior sd in units of the grounds' spread"
+    )
+    composite_size_sd: float = param(
+        2.0, lo=0.0, hi=100.0, doc="composite: prior sd of a relative change of the effect's size"
+    )
+    composite_prior_p0: float = param(
+        1e-4, lo=0.0, hi=1e3, lo_open=True, doc="composite: p0, prior variance in every direction"
+    )
+    composite_memory_samples: float = param(
+        500.0, lo=1.0, hi=1e9, doc="composite: samples after which the prior uncertainty is back"
+    )
+    composite_tracking_n_s_m: float = param(
+        0.1, unit="N s/m", lo=0.0, hi=10.0, doc="composite: force per m/s of tracking error"
+    )
+    composite_tracking_below_m: float = param(
+        0.25,
+        unit="m",
+        lo=0.0,
+        hi=100.0,
+        doc="composite: the tracking term only this near the surface",
+    )
+    composite_confidence: float = param(
+        30.0, lo=0.0, hi=1e6, doc="composite: likelihood ratio a change must exceed"
+    )
+    composite_far_n: float = param(
+        3e-4,
+        unit="N",
+        lo=0.0,
+        hi=1.0,
+        lo_open=True,
+        doc="composite: prior sd of the prediction's change 0.5 m and more above the surface",
+    )
+    composite_batch: int = param(
+        16, lo=1, hi=4096, doc="composite: samples per update (the filter runs on each one)"
+    )
+    composite_window: int = param(
+        300, lo=8, hi=100000, doc="composite: recent samples the confidence test looks at"
+    )
 
     def __post_init__(self) -> None:
         check_settings(self)

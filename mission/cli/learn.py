@@ -43,6 +43,21 @@ def add_parser(sub: Any) -> None:
     )
     t.add_argument("--seed", type=int, default=0)
     t.set_defaults(func=cmd_learn)
+    b = learn.add_parser(
+        "basis", help="a basis shared by several grounds, each ground's coefficients (DAIML)"
+    )
+    b.add_argument("data", type=Path, nargs="+", help="dataset files, one ground or more each")
+    b.add_argument("--out", type=Path, required=True, help="model file (.npz)")
+    b.add_argument("--home", default="rho1", help="the ground to start on (default: rho1)")
+    b.add_argument("--max-epochs", type=int, default=300)
+    b.add_argument(
+        "--adversarial-weight",
+        type=float,
+        default=0.1,
+        help="weight of the ground classifier's term (0: plain multi-ground training)",
+    )
+    b.add_argument("--seed", type=int, default=0)
+    b.set_defaults(func=cmd_learn)
     e = learn.add_parser("evaluate", help="none, analytic and neural over seeded landing trials")
     e.add_argument("--world", default="rho2")
     e.add_argument(
@@ -93,6 +108,8 @@ def cmd_learn(args: argparse.Namespace) -> int:
         for kind, path in paths.items():
             print(f"{kind}: {path}")
         return 0
+    if args.action == "basis":
+        return _cmd_basis(args)
     if args.action in ("memory", "online-eval"):
         from mission.cli.online import cmd_online_learn
 
@@ -112,4 +129,31 @@ def cmd_learn(args: argparse.Namespace) -> int:
 
     rhos = [float(r) for r in args.rho_list.split(",")]
     print(plot_prediction(load_model(args.network), load_vehicle(), rhos, args.out))
+    return 0
+
+
+def _cmd_basis(args: argparse.Namespace) -> int:
+    from learner.basis import BasisConfig, ground_name, train_basis
+    from learner.dataset import load_dataset
+    from learner.model import save_model
+
+    grounds: dict[str, list[Any]] = {}
+    for path in args.data:
+        dataset = load_dataset(path)
+        grounds.setdefault(ground_name(dataset), []).append(dataset)
+    if args.home not in grounds:
+        raise ConfigError(f"--home: {args.home!r} is not among the grounds {sorted(grounds)}")
+    if len(grounds) < 2:
+        raise ConfigError(f"a shared basis needs two grounds or more; got {sorted(grounds)}")
+    config = BasisConfig(
+        max_epochs=args.max_epochs, adversarial_weight=args.adversarial_weight, seed=args.seed
+    )
+    net, metrics = train_basis(grounds, args.home, config, sources=[str(p) for p in args.data])
+    save_model(args.out, net)
+    args.out.with_suffix(".metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    for name, m in metrics["grounds"].items():
+        rmse = m["validation_rmse_n"]["fge_z"] * 1000
+        print(f"ground {name}: {m['samples']} samples, validation RMSE f_ge,z {rmse:.2f} mN")
+    print(f"{metrics['epochs']} epochs in {metrics['wall_s']:.0f} s; home ground {args.home}")
+    print(f"model: {args.out}")
     return 0

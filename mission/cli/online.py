@@ -91,10 +91,20 @@ def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) ->
     e.add_argument("--trials", type=int, default=10, help="seeded trials per condition")
     e.add_argument("--seed", type=int, default=0, help="first trial seed")
     e.add_argument("--methods", default=",".join(METHODS), help="comma-separated methods")
-    e.add_argument("--rho", default="2,0.5", help="rho_sim of the adaptation worlds")
+    e.add_argument("--rho", default="2,0.5,4,1", help="rho_sim of the worlds (1: the training rho)")
     e.add_argument("--network", default="rho1", help="the offline network (default: rho1)")
     e.add_argument("--hold-s", type=float, default=10.0, help="hold 3 cm above ground this long")
     e.add_argument("--no-remember", action="store_true", help="skip experiment 4.4")
+    e.add_argument(
+        "--basis", default="grounds", help="the basis model composite adapts (default: grounds)"
+    )
+    e.add_argument(
+        "--controller",
+        choices=("thesis", "default"),
+        default="thesis",
+        help="thesis: the thesis's position PD, where a model error shows in the hold "
+        "(default); default: the autopilot's PD with its integral",
+    )
     e.add_argument(
         "--workers", type=int, default=None, help="flights at once (default: one per core)"
     )
@@ -149,6 +159,8 @@ def cmd_online_learn(args: argparse.Namespace) -> int:
         remember=not args.no_remember,
         params=tuple(args.param),
         workers=workers,
+        controller=args.controller,
+        basis=args.basis,
     )
     if args.json:
         print(json.dumps(result))

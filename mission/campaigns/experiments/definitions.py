@@ -14,7 +14,15 @@ from dataclasses import dataclass
 
 from mission.campaigns.experiments.missions import MISSION_KINDS, make_mission
 
-ONLINE_METHODS = ("naive", "constraint", "margin", "ewc", "replay", "rls")
+ONLINE_METHODS = ("naive", "constraint", "margin", "ewc", "replay", "rls", "composite")
+BASIS = "grounds"  # composite adapts the basis learnt over several grounds (learner/basis.py)
+
+
+def network_for(method: str | None, network: str = "rho1") -> str:
+    """The network a condition flies: composite the basis model, the others `network`."""
+    return BASIS if method == "composite" else network
+
+
 MULTI_NETWORK = "@multi"  # the network trained on several rho once per campaign (4.2)
 MULTI_RHOS = (1.0, 2.0)
 MEASURES = {  # the error measures of the report: key in a flight summary -> (label, unit, scale)
@@ -192,6 +200,8 @@ def _offline_vs_online() -> Experiment:
             _c(f"offline@{rho:g}", f"rho1 offline at {rho:g}", ONLINE_TRIALS, f, group=g),
             _c(f"online@{rho:g}", f"rho1 + naive online at {rho:g}", ONLINE_TRIALS,
                dataclasses.replace(f, online="naive"), group=g),
+            _c(f"composite@{rho:g}", f"grounds + composite at {rho:g}", ONLINE_TRIALS,
+               dataclasses.replace(f, network=BASIS, online="composite"), group=g),
         ]  # fmt: skip
     return Experiment(
         "4.3",
@@ -202,6 +212,8 @@ def _offline_vs_online() -> Experiment:
         (
             Expectation("online@2", "offline@2", "lower", "online adapts to an unseen rho"),
             Expectation("online@1", "offline@1", "similar", "nothing to gain at the trained rho"),
+            Expectation("composite@2", "offline@2", "lower", "composite adapts to an unseen rho"),
+            Expectation("composite@1", "offline@1", "similar", "composite does no harm at rho 1"),
         ),
     )
 
@@ -210,10 +222,12 @@ def _remembering() -> Experiment:
     back = Flight(rho_sim=1.0, network="rho1")
     conditions = [_c("never-adapted", "rho1 at 1, not adapted", METHOD_TRIALS, back)]
     for method in ONLINE_METHODS:
-        adapt = Flight(rho_sim=2.0, network="rho1", online=method)
+        adapt = Flight(rho_sim=2.0, network=network_for(method), online=method)
+        # composite recalls a ground from its memory with the method on; the rest fly as adapted
+        again = "composite" if method == "composite" else None
         conditions.append(
             _c(method, f"adapted at 2 by {method}, back at 1", METHOD_TRIALS, adapt,
-               dataclasses.replace(back, carry_network=True))
+               dataclasses.replace(back, carry_network=True, online=again))
         )  # fmt: skip
     return Experiment(
         "4.4",
@@ -221,9 +235,12 @@ def _remembering() -> Experiment:
         "The rho1 network adapts online at rho_sim 2, then flies offline at rho_sim 1 again: "
         "how much of rho 1 has each method forgotten?",
         tuple(conditions),
-        tuple(
-            Expectation(m, "naive", "lower", f"{m} forgets less than naive")
-            for m in ("constraint", "margin", "ewc", "replay")
+        (
+            *(
+                Expectation(m, "naive", "lower", f"{m} forgets less than naive")
+                for m in ("constraint", "margin", "ewc", "replay", "composite")
+            ),
+            Expectation("composite", "never-adapted", "similar", "composite recalls rho 1"),
         ),
     )
 
@@ -232,9 +249,10 @@ def _online_methods() -> Experiment:
     f = Flight(rho_sim=2.0, network="rho1")
     conditions = [_c("offline", "rho1 offline", METHOD_TRIALS, f)]
     conditions += [
-        _c(m, f"rho1 + {m}", METHOD_TRIALS, dataclasses.replace(f, online=m))
+        _c(m, f"{network_for(m)} + {m}", METHOD_TRIALS,
+           dataclasses.replace(f, network=network_for(m), online=m))
         for m in ONLINE_METHODS
-    ]
+    ]  # fmt: skip
     return Experiment(
         "4.5",
         "Comparing the online methods",
@@ -285,6 +303,8 @@ def _size_and_obstacles() -> Experiment:
                dataclasses.replace(f, model="analytic"), group=kind),
             _c(f"neural@{kind}", f"rho1 net, {kind}", 3,
                dataclasses.replace(f, network="rho1"), group=kind),
+            _c(f"composite@{kind}", f"grounds + composite, {kind}", 3,
+               dataclasses.replace(f, network=BASIS, online="composite"), group=kind),
         ]  # fmt: skip
     return Experiment(
         "4.7",

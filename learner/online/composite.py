@@ -1,0 +1,284 @@
+"""`composite`: the coefficients a of f = phi(x)^T a adapted online, with a memory of
+grounds and a confidence test that leaves a correct model alone (pure functions).
+
+The basis phi (the network's hidden layers and a constant, learner/basis.py) stays fixed;
+only the vertical column a of the last layer moves (the lateral ground effect is zero here,
+the lateral targets are measurement noise). In standardised units throughout.
+
+- Estimate (Neural-Fly's composite adaptation, in discrete form): a Kalman filter on a,
+  sample by sample, with measurement noise r and a random-walk process noise Q (the
+  forgetting: after `memory_samples` samples without information the prior uncertainty is
+  back). Its measurement is the composite target: the force of equation 3.16 plus the
+  tracking term k s, s = (v_z - v_dz) + Lambda (z - z_d) the position loop's vertical
+  composite error (Neural-Fly's a' = ... - P phi R^-1 (phi a - y) + P phi s): a vehicle
+  that floats above its setpoint asks for more predicted force than its accelerometer
+  shows, so that what the measurement cannot see (its bias, a lag) is learnt as well.
+- Prior (`prior_covariance`): the size of the effect (a scale of the home prediction) and
+  the directions in which the training grounds' coefficients differ are uncertain, every
+  other direction nearly certain, and a change of the prediction far from the surface
+  (0.5 m and more up, where every ground agrees) tightly bounded. a moves readily where
+  grounds differ (near the surface), hardly elsewhere.
+- No harm: the estimate is published (becomes the controller's model) only when, over the
+  recent window of samples, it explains the composite target (the measured force plus the
+  tracking error's) better than what is published by more than `confidence` in units of
+  the noise variance (a likelihood-ratio test: (SSR_published - SSR_estimate) / sigma^2).
+  A correct model is therefore left alone; a consistent error (the same sign sample after
+  sample) passes the test within a fraction of a second.
+- Memory: the grounds known (the offline training grounds, protected, and every ground
+  learnt in flight) are kept with their coefficients. A ground is identified by how it
+  pushes at the heights the vehicle flies: when a stored ground explains the window better
+  than what is published (by the same test) and no worse than the fresh estimate, it is
+  recalled whole (estimate, publication and a fresh prior around it). A learnt ground's
+  coefficients follow the estimate while it is the ground in use; a protected one is never
+  changed (learning on it starts a new entry).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+Z = 2  # the vertical target's row in the last layer
+MAX_LEARNT = 8  # grounds learnt in flight that the memory keeps (the oldest goes first)
+
+
+@dataclass(frozen=True)
+class CompositeConfig:
+    """The method's numbers in standardised units (learner.online.settings converts)."""
+
+    measurement_var: float  # r: the target's noise variance
+    noise_floor_var: float  # the smallest noise variance the confidence test assumes
+    prior_scale: float  # s
+    prior_isotropic: float  # p0
+    memory_samples: float  # samples over which the prior uncertainty comes back
+    tracking_gain: float  # standardised force per (m/s) of composite error
+    confidence: float  # the likelihood-ratio threshold
+    window: int  # samples the tests look at
+    far_var: float  # the prior's variance of the prediction far from the surface
+    size_sd: float  # the prior sd of a relative change of the effect's size
+    layer_bound: float  # spectral norm of the last layer, kept
+
+
+@dataclass(frozen=True)
+class Ground:
+    name: str
+    coefficients: np.ndarray  # (n_features + 1,): the vertical row and its bias
+    protected: bool  # an offline ground: never overwritten
+
+
+@dataclass(frozen=True)
+class CompositeState:
+    estimate: np.ndarray  # a
+    covariance: np.ndarray  # P
+    prior: np.ndarray  # P0: the shape the process noise restores
+    published: np.ndarray  # what the controller uses
+    current: int  # index into grounds of the ground in use
+    grounds: tuple[Ground, ...]
+    window_phi: np.ndarray  # (<= window, n + 1) recent basis values
+    window_y: np.ndarray  # (<= window,) recent vertical targets
+    learnt: int = 0  # grounds learnt so far (names)
+
+
+@dataclass(frozen=True)
+class Decision:
+    kind: str  # "held" (nothing published), "adapted", "recalled"
+    statistic: float  # the likelihood ratio of the change published (or the best refused)
+    ground: str  # the ground in use afterwards
+
+
+def prior_covariance(
+    home: np.ndarray,
+    others: list[np.ndarray],
+    scale: float,
+    p0: float,
+    far_moment: np.ndarray | None = None,
+    far_var: float = 1.0,
+    size: np.ndarray | None = None,
+    size_sd: float = 0.0,
+) -> np.ndarray:
+    """P0 = (P^-1 + M / far_var)^-1 with P = k^2 u u^T + s^2 C + p0 I: u the change that
+    scales the home prediction by (1 + b) (`size`: the size of the effect, rho to first
+    order, is the least certain thing about a new ground; k its prior sd), C the mean outer
+    product of the other grounds' offsets from home (how grounds were seen to differ in
+    shape); M the second moment of phi far from the surface, so that a change that would
+    move the prediction up there by more than sqrt(far_var) RMS is a priori unlikely (a
+    tight prior where every ground agrees)."""
+    n = len(home)
+    c = np.zeros((n, n))
+    for a in others:
+        d = a - home
+        c += np.outer(d, d)
+    if others:
+        c /= len(others)
+    p = scale**2 * c + p0 * np.eye(n)
+    if size is not None:
+        p += size_sd**2 * np.outer(size, size)
+    if far_moment is not None and np.any(far_moment):
+        p = np.linalg.inv(np.linalg.inv(p) + far_moment / far_var)
+    return 0.5 * (p + p.T)
+
+
+def initial_state(
+    grounds: tuple[Ground, ...],
+    current: int,
+    others: list[np.ndarray],
+    config: CompositeConfig,
+    far_moment: np.ndarray | None = None,
+    output_offset: float = 0.0,
+) -> CompositeState:
+    """`output_offset`: the standardised zero force (y_mean / y_std) of the vertical axis."""
+    a = grounds[current].coefficients.copy()
+    size = a.copy()
+    size[-1] += output_offset  # phi^T size is the prediction in units of y_std
+    prior = prior_covariance(
+        a,
+        others,
+        config.prior_scale,
+        config.prior_isotropic,
+        far_moment,
+        config.far_var,
+        size,
+        config.size_sd,
+    )
+    n = len(a)
+    return CompositeState(
+        a, prior.copy(), prior, a.copy(), current, grounds, np.zeros((0, n)), np.zeros(0)
+    )
+
+
+def ssr(phi: np.ndarray, y: np.ndarray, a: np.ndarray) -> float:
+    return float(np.sum((y - phi @ a) ** 2))
+
+
+def kalman(
+    a: np.ndarray,
+    p: np.ndarray,
+    prior: np.ndarray,
+    phi: np.ndarray,
+    y: np.ndarray,
+    tracking: np.ndarray,
+    config: CompositeConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The estimate and its covariance after the samples (rows of phi, y, tracking errors)."""
+    q = prior / config.memory_samples
+    r = config.measurement_var
+    for phi_i, y_i, s_i in zip(phi, y, tracking, strict=True):
+        p = p + q
+        p_phi = p @ phi_i
+        denominator = r + phi_i @ p_phi
+        gain = p_phi / denominator
+        # the measurement's innovation and the tracking error's force, through one gain
+        a = a + gain * ((y_i - phi_i @ a) + config.tracking_gain * s_i)
+        p = p - np.outer(gain, p_phi)
+        p = 0.5 * (p + p.T)
+    return a, p
+
+
+def bounded(a: np.ndarray, others: np.ndarray, layer_bound: float) -> np.ndarray:
+    """The vertical row projected so that the last layer keeps its spectral-norm bound
+    (`others`: the lateral rows, unchanged)."""
+    w = np.vstack([others, a[None, :-1]])
+    sigma = float(np.linalg.norm(w, 2))
+    if sigma <= layer_bound:
+        return a
+    row = a.copy()
+    # scale the vertical row alone until the bound holds (bisection: the norm is monotone)
+    lo, hi = 0.0, 1.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if np.linalg.norm(np.vstack([others, mid * a[None, :-1]]), 2) <= layer_bound:
+            lo = mid
+        else:
+            hi = mid
+    row[:-1] = lo * a[:-1]
+    return row
+
+
+def composite_update(
+    state: CompositeState,
+    phi: np.ndarray,
+    y: np.ndarray,
+    tracking: np.ndarray,
+    lateral_rows: np.ndarray,
+    config: CompositeConfig,
+) -> tuple[CompositeState, Decision]:
+    """A batch of samples (basis values with their constant, vertical targets, tracking
+    errors as standardised forces per gain): the new state and what was published."""
+    a, p = kalman(state.estimate, state.covariance, state.prior, phi, y, tracking, config)
+    a = bounded(a, lateral_rows, config.layer_bound)
+    # the tests judge the composite target: the measured force and the tracking error's
+    wp = np.concatenate([state.window_phi, phi])[-config.window :]
+    wy = np.concatenate([state.window_y, y + config.tracking_gain * tracking])[-config.window :]
+    state = replace(state, estimate=a, covariance=p, window_phi=wp, window_y=wy)
+    n = len(wy)
+    published = ssr(wp, wy, state.published)
+    fresh = ssr(wp, wy, a)
+    sigma2 = max(fresh / n, config.noise_floor_var)
+    gain = (published - fresh) / sigma2
+    # a stored ground that explains the window as well as the fresh estimate: recall it
+    best, best_gain = -1, -np.inf
+    for k, g in enumerate(state.grounds):
+        if k == state.current and np.array_equal(g.coefficients, state.published):
+            continue
+        g_gain = (published - ssr(wp, wy, g.coefficients)) / sigma2
+        if g_gain > best_gain:
+            best, best_gain = k, g_gain
+    name = state.grounds[state.current].name
+    if best >= 0 and best_gain > config.confidence and gain - best_gain < config.confidence:
+        recalled = state.grounds[best].coefficients.copy()
+        state = replace(
+            state,
+            estimate=recalled,
+            covariance=state.prior.copy(),
+            published=recalled.copy(),
+            current=best,
+        )
+        return state, Decision("recalled", best_gain, state.grounds[best].name)
+    if gain <= config.confidence:
+        return state, Decision("held", gain, name)
+    grounds = list(state.grounds)
+    current, learnt = state.current, state.learnt
+    if grounds[current].protected:  # learning on an offline ground: a new ground
+        learnt += 1
+        grounds.append(Ground(f"learnt-{learnt}", a.copy(), False))
+        kept = [g for g in grounds if not g.protected]
+        if len(kept) > MAX_LEARNT:  # the oldest learnt ground makes room
+            grounds.remove(kept[0])
+        current = len(grounds) - 1
+    else:
+        grounds[current] = replace(grounds[current], coefficients=a.copy())
+    state = replace(
+        state, published=a.copy(), grounds=tuple(grounds), current=current, learnt=learnt
+    )
+    return state, Decision("adapted", gain, grounds[current].name)
+
+
+def grounds_from_header(header: dict, n_features: int) -> tuple[tuple[Ground, ...], int]:
+    """The grounds a model file knows (its basis's offline grounds, protected, and those
+    learnt in earlier flights) and the index of the one to start on."""
+    basis = header.get("basis") or {}
+    grounds: list[Ground] = []
+    for name, head in sorted((basis.get("grounds") or {}).items()):
+        row = np.concatenate([np.asarray(head["weights"])[Z], [np.asarray(head["biases"])[Z]]])
+        grounds.append(Ground(name, row.astype(float), True))
+    for entry in basis.get("learnt") or []:
+        grounds.append(Ground(entry["name"], np.asarray(entry["coefficients"], float), False))
+    if any(len(g.coefficients) != n_features + 1 for g in grounds):
+        raise ValueError("the basis's grounds do not match the network's last layer")
+    names = [g.name for g in grounds]
+    start = basis.get("current", basis.get("home"))
+    return tuple(grounds), names.index(start) if start in names else -1
+
+
+def grounds_to_header(header: dict, state: CompositeState) -> dict:
+    """The header of a model file saved after a flight: the learnt grounds and the one in
+    use, for the next flight to recall."""
+    basis = dict(header.get("basis") or {})
+    basis["learnt"] = [
+        {"name": g.name, "coefficients": g.coefficients.tolist()}
+        for g in state.grounds
+        if not g.protected
+    ]
+    basis["current"] = state.grounds[state.current].name
+    return {**header, "basis": basis}
