@@ -40,9 +40,7 @@ def _autopilot(sim: int | str, *options: str) -> list[str]:
 def autopilot_command(sim: int | str, mission_path: Path, *options: str) -> list[str]:
     """The command line of an autopilot process flying `mission_path` against a local sim on
     its own, with no ground station (reproducible: arming and take-off at fixed sim times)."""
-    return _autopilot(
-        sim, "--mission", str(mission_path), "--auto-start", "--no-gcs", *options
-    )
+    return _autopilot(sim, "--mission", str(mission_path), "--auto-start", "--no-gcs", *options)
 
 
 def gcs_autopilot_command(sim: int | str, gcs_port: int, *options: str) -> list[str]:
