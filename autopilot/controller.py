@@ -30,6 +30,14 @@ from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 # Below this the vertical term of 3.12 and 3.13 would flip the desired tilt: commanding a
 # fall faster than 0.2 g is refused by holding it here.
 MIN_VERTICAL_ACCEL_M_S2 = 0.2 * GRAVITY_M_S2
+# The horizontal jerk limit (PX4's MPC_JERK_MAX, 8 m/s^3 on a vehicle of 0.2-0.25 m arms),
+# scaled to this vehicle's size: with thrust per mass alike, a vehicle's angular
+# acceleration for a given moment share goes as 1/arm, its attitude time scales as
+# sqrt(arm), so an acceleration it can follow changes sqrt(0.225 / 0.045) = 2.2 times
+# faster. A tilt command that changes faster rings the attitude loop, which a slow motor
+# (tau 0.08 s leaves the 400/40 loop a damping ratio of 0.05) or a late IMU turns into a
+# flip: PX4 shapes its setpoints with this limit for the same reason.
+JERK_DEFAULT_M_S3 = 18.0
 
 
 @dataclass(frozen=True)
@@ -60,6 +68,10 @@ class ControllerParams:
     yaw_p: float = param(100.0, unit="1/s^2", lo=0.0, hi=10000.0, doc="yaw k_p")
     yaw_d: float = param(20.0, unit="1/s", lo=0.0, hi=1000.0, doc="yaw k_d")
     max_tilt_deg: float = param(30.0, unit="deg", lo=1.0, hi=60.0, doc="desired tilt limit")
+    max_jerk_m_s3: float = param(
+        JERK_DEFAULT_M_S3, unit="m/s^3", lo=0.0, hi=1000.0,
+        doc="how fast a setpoint's jump may change the horizontal acceleration (0: at once)",
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -88,6 +100,9 @@ class ControlOutput:
     desired_pitch_rad: float
     saturated: bool = False  # thrust or tilt limited: the integral must not wind up
     pd_acceleration_m_s2: Vec3 = (0.0, 0.0, 0.0)  # the PD term of 3.7, what the integral sums
+    # the horizontal position term a0 (p_d - p) of 3.7 (world x, y) as commanded, jerk-limited:
+    # what the next step's limit starts from
+    position_term_m_s2: tuple[float, float] = (0.0, 0.0)
 
 
 def _wrap(angle: float) -> float:
@@ -138,6 +153,23 @@ def handover(integral_m_s2: Vec3, change_m_s2: Vec3) -> Vec3:
     )
 
 
+def jerk_limited(
+    previous_m_s2: tuple[float, float],
+    wanted_m_s2: tuple[float, float],
+    dt_s: float,
+    params: ControllerParams,
+) -> tuple[float, float]:
+    """`wanted_m_s2`, moved from `previous_m_s2` by at most `max_jerk_m_s3` times `dt_s` (as a
+    vector: the direction of the change is kept)."""
+    if params.max_jerk_m_s3 <= 0.0 or dt_s <= 0.0:
+        return wanted_m_s2
+    du, dv = wanted_m_s2[0] - previous_m_s2[0], wanted_m_s2[1] - previous_m_s2[1]
+    step, most = math.hypot(du, dv), params.max_jerk_m_s3 * dt_s
+    if step <= most:
+        return wanted_m_s2
+    return (previous_m_s2[0] + du * most / step, previous_m_s2[1] + dv * most / step)
+
+
 def control(
     state: FlightState,
     setpoint: Setpoint,
@@ -145,14 +177,25 @@ def control(
     vehicle: Vehicle,
     params: ControllerParams,
     integral_m_s2: Vec3 = (0.0, 0.0, 0.0),
+    previous_position_term_m_s2: tuple[float, float] | None = None,
+    dt_s: float = 0.0,
 ) -> ControlOutput:
+    """One step. `previous_position_term_m_s2`: the last step's `position_term_m_s2` (None:
+    none, as on the ground), `dt_s` before this one. The horizontal position term then
+    changes by at most `max_jerk_m_s3` times `dt_s`: a setpoint that jumps (a new waypoint,
+    the carrot turning a corner) tilts the vehicle over a few tenths of a second instead of
+    in one step, as PX4's jerk-limited setpoints do. The velocity term is not limited: it
+    moves with the vehicle, and state noise passes through it unfiltered, as before."""
     m, g = vehicle.mass_kg, GRAVITY_M_S2
     p, v, sp, i = state.position_m, state.velocity_m_s, setpoint, integral_m_s2
     a0, a1 = params.position_p, params.position_d
     # (3.7), world frame: the PD term, then the feed-forward and the integral term
+    e_xy = (a0 * (sp.position_m[0] - p[0]), a0 * (sp.position_m[1] - p[1]))
+    if previous_position_term_m_s2 is not None:
+        e_xy = jerk_limited(previous_position_term_m_s2, e_xy, dt_s, params)
     pd = (
-        a0 * (sp.position_m[0] - p[0]) + a1 * (sp.velocity_m_s[0] - v[0]),
-        a0 * (sp.position_m[1] - p[1]) + a1 * (sp.velocity_m_s[1] - v[1]),
+        e_xy[0] + a1 * (sp.velocity_m_s[0] - v[0]),
+        e_xy[1] + a1 * (sp.velocity_m_s[1] - v[1]),
         a0 * (sp.position_m[2] - p[2]) + a1 * (sp.velocity_m_s[2] - v[2]),
     )
     ff = sp.acceleration_m_s2
@@ -232,4 +275,5 @@ def control(
         desired_pitch_rad=theta_dc,
         saturated=saturated,
         pd_acceleration_m_s2=pd,
+        position_term_m_s2=e_xy,
     )

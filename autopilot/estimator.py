@@ -415,6 +415,21 @@ def fuse_pose(
     return Fused(_updated(est, gain @ innovation, p - gain @ ph.T), ratio, True)
 
 
+def reset_position(
+    est: Estimate, innovation_m: np.ndarray, axes: list[int], sd_m: float
+) -> Estimate:
+    """PX4's EKF2 reset to a position source whose fusion keeps failing: the position on
+    `axes` moved by the innovation, its covariance rows and columns cleared, its variance the
+    source's."""
+    position = est.position_m.copy()
+    position[axes] += innovation_m
+    p = est.covariance.copy()
+    p[axes, :] = 0.0
+    p[:, axes] = 0.0
+    p[axes, axes] = sd_m * sd_m
+    return dataclasses.replace(est, position_m=position, covariance=p)
+
+
 def fuse_heading(
     est: Estimate, field_body: np.ndarray, field_world: np.ndarray, sd_rad: float, gate_sd: float
 ) -> Fused:

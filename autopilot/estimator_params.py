@@ -62,3 +62,7 @@ class EstimatorParams:
     source_timeout_s: float = param(
         0.3, unit="s", lo=0.01, hi=10.0, doc="a source silent this long is lost"
     )
+    ev_reset_s: float = param(
+        0.5, unit="s", lo=0.01, hi=10.0,
+        doc="motion capture arriving but rejected this long: the position reset to it",
+    )  # fmt: skip

@@ -86,6 +86,7 @@ class Navigation:
         self._pending_w = np.zeros(3)
         self._turned = np.array([1.0, 0.0, 0.0, 0.0])
         self._last_seen: dict[str, float] = {}
+        self._mocap_fused_s: float | None = None  # the last pose that passed the gate
         self.terrain = Terrain()
         self._baro_ref_m: float | None = None
         self._standing = False  # resting() was told this step
@@ -327,7 +328,18 @@ class Navigation:
                 self.estimate, innovation, axes, p.ev_pos_noise_m, yaw, p.ev_att_noise_rad,
                 p.gate_sd,
             )  # fmt: skip
-            self._fuse("motion capture", fused)
+            if self._fuse("motion capture", fused) or self._mocap_fused_s is None:
+                self._mocap_fused_s = t
+            elif t - self._mocap_fused_s >= p.ev_reset_s and axes:
+                # poses keep coming and keep failing the gate (a timing or scale error the
+                # filter does not model): reset to them rather than dead-reckon away, as
+                # EKF2 resets a position source whose fusion is failing
+                self.estimate = ekf.reset_position(
+                    self.estimate, innovation, axes, p.ev_pos_noise_m
+                )
+                self._mocap_fused_s = t
+                self.quality.resets += 1
+                self.events.append("estimator: position reset to motion capture")
 
     def _gps_position(self, g: dict) -> tuple[float, float, float]:
         o = self.origin

@@ -279,7 +279,10 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                     integral = handover(integral, change)
                 rotor_thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in speeds)
                 ge = fixed_point_step(ge, target, rotor_thrust)
-                output = control(state, cmd.setpoint, ge, vehicle, tuning.controller, integral)
+                term = output.position_term_m_s2 if output is not None else None
+                output = control(
+                    state, cmd.setpoint, ge, vehicle, tuning.controller, integral, term, t - last_t
+                )
                 speeds = output.rotor_speeds_rad_s
                 # anti-windup: not on the ground (but while taking off: a vehicle heavier than
                 # its file must wind the integral up to leave it), in contact or saturated.

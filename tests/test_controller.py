@@ -13,6 +13,7 @@ from autopilot.controller import (
     control,
     handover,
     integrate,
+    jerk_limited,
 )
 from autopilot.ground_models import (
     AnalyticGroundEffect,
@@ -167,3 +168,35 @@ def test_a_new_model_takes_over_what_the_integral_held_and_no_more():
     assert handover((0.0, 0.0, -0.03), (0.0, 0.0, 0.02)) == pytest.approx((0.0, 0.0, -0.01))
     assert handover((0.0, 0.0, -0.03), (0.0, 0.0, 0.05)) == (0.0, 0.0, 0.0)
     assert handover((0.01, 0.0, -0.03), (0.02, 0.0, -0.01)) == (0.01, 0.0, -0.03)
+
+
+def test_the_jerk_limit_moves_a_vector_towards_the_wanted_one_at_most_jerk_times_dt():
+    gains = ControllerParams(max_jerk_m_s3=20.0)
+    assert jerk_limited((0.0, 0.0), (0.01, 0.0), 0.004, gains) == (0.01, 0.0)  # within reach
+    step = jerk_limited((1.0, 0.0), (4.0, 4.0), 0.004, gains)
+    assert math.hypot(step[0] - 1.0, step[1]) == pytest.approx(0.08)
+    assert step[1] / (step[0] - 1.0) == pytest.approx(4.0 / 3.0)  # the change keeps its direction
+    assert jerk_limited((1.0, 0.0), (4.0, 4.0), 0.004, ControllerParams(max_jerk_m_s3=0.0)) == (
+        4.0,
+        4.0,
+    )
+
+
+def test_a_jumping_setpoint_tilts_the_vehicle_at_the_jerk_limit_and_not_at_once():
+    """A waypoint 1 m east appears: without a previous step the position term is a0 * 1 m at
+    once; after a step with none, it grows by the jerk limit times dt, and the velocity term
+    passes unlimited (it moves with the vehicle, not with the setpoint)."""
+    gains = ControllerParams()
+    east = Setpoint((1.0, 0.0, 1.0))
+    at_once = control(LEVEL, east, (0.0, 0.0, 0.0), V, gains)
+    assert at_once.position_term_m_s2 == pytest.approx((gains.position_p, 0.0))
+    shaped = control(LEVEL, east, (0.0, 0.0, 0.0), V, gains, (0.0, 0.0, 0.0), (0.0, 0.0), 0.004)
+    assert shaped.position_term_m_s2 == pytest.approx((gains.max_jerk_m_s3 * 0.004, 0.0))
+    assert 0.0 < shaped.desired_pitch_rad < at_once.desired_pitch_rad
+    assert not shaped.saturated  # a delay, not a saturation: the integral runs on
+    moving = FlightState((0.0, 0.0, 1.0), (1.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    out = control(
+        moving, Setpoint((0.0, 0.0, 1.0)), (0.0, 0.0, 0.0), V, gains, (0, 0, 0), (0, 0), 0.004
+    )
+    assert out.pd_acceleration_m_s2[0] == pytest.approx(-gains.position_d)  # velocity term whole
+    assert out.pd_acceleration_m_s2[2] == pytest.approx(0.0)

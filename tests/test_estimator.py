@@ -85,6 +85,20 @@ def test_an_outlier_is_rejected_by_the_innovation_gate_and_changes_nothing():
     assert not nan.accepted
 
 
+def test_a_position_reset_moves_the_position_and_forgets_its_correlations():
+    est = at_rest()
+    for k in range(1, 26):
+        est = ekf.predict(est, k * DT_US, np.array([0.5, 0.0, GRAVITY_M_S2]), np.zeros(3), NOISE)
+    reset = ekf.reset_position(est, np.array([0.3, -0.2]), [0, 1], 0.002)
+    assert reset.position_m[:2] == pytest.approx(est.position_m[:2] + np.array([0.3, -0.2]))
+    assert reset.position_m[2] == est.position_m[2]
+    assert np.array_equal(reset.velocity_m_s, est.velocity_m_s)
+    p = reset.covariance
+    assert p[0, 0] == p[1, 1] == pytest.approx(4e-6)
+    assert not p[0, 1:].any() and not p[3:, 1].any()  # no correlations left
+    assert np.array_equal(p[2:, 2:], est.covariance[2:, 2:])
+
+
 def test_the_heading_of_a_magnetometer_corrects_the_yaw():
     yawed = ekf.rotation_vector_quat(np.array([0.0, 0.0, 0.2]))
     est = ekf.initial(0, np.zeros(3), yawed, 0.01, attitude_sd_rad=0.3)

@@ -246,6 +246,14 @@ def _markdown(
         f"{f['before'] * 1000:.2f} mN -> {f['after'] * 1000:.2f} mN, "
         f"shrink {f['shrink'] * 100:.0f}%"
     )
+    if "force_rms_n_measured_floor" in g:
+        m = g["force_rms_n_measured_floor"]
+        lines.append(
+            f"- the same against the noise floor measured at 0.1 s (Allan variance of the "
+            f"corrected residual: {m['floor'] * 1000:.2f} mN, white noise would leave "
+            f"{m['white_floor'] * 1000:.2f}): {m['before'] * 1000:.2f} mN -> "
+            f"{m['after'] * 1000:.2f} mN, shrink {m['shrink'] * 100:.0f}%"
+        )
     if "torque_rms_n_m" in g:
         q = g["torque_rms_n_m"]
         lines.append(

@@ -53,3 +53,34 @@ def force_gap_ms(
 
 def force_gap_rms(residual: np.ndarray, segment: np.ndarray, dt_s: float) -> float:
     return float(np.sqrt(force_gap_ms(residual, segment, dt_s)))
+
+
+def measured_floor_ms(residual: np.ndarray, segment: np.ndarray, dt_s: float) -> float:
+    """The noise a SMOOTH_WINDOW_S average keeps (N^2, summed over components), measured
+    instead of assumed white: the Allan variance at that window, half the mean square step
+    between adjacent non-overlapping window means within each segment. White noise of
+    per-component variance v gives 3 v / window, the floor `force_gap_ms` takes off;
+    coloured noise (an IMU's flicker, frame vibration, the smoothing of a differentiated
+    velocity) keeps more. A systematic force that changes within 0.2 s counts here too, so
+    it is taken from the residual left after the correction."""
+    window = max(1, round(SMOOTH_WINDOW_S / dt_s))
+    steps = []
+    for s in np.unique(segment):
+        x = residual[segment == s]
+        n = len(x) // window
+        if n >= 2:
+            means = x[: n * window].reshape(n, window, -1).mean(axis=1)
+            steps.append(np.diff(means, axis=0))
+    if not steps:
+        return 0.0
+    d = np.concatenate(steps)
+    return float(0.5 * np.mean(np.sum(d * d, axis=1)))
+
+
+def gap_over_floor_ms(
+    residual: np.ndarray, segment: np.ndarray, dt_s: float, floor_ms: float
+) -> float:
+    """Mean square of the residual's SMOOTH_WINDOW_S averages (N^2) less `floor_ms`."""
+    window = max(1, round(SMOOTH_WINDOW_S / dt_s))
+    smooth = smooth_per_segment(residual, segment, window)
+    return max(float(np.mean(np.sum(smooth**2, axis=1))) - floor_ms, 0.0)

@@ -77,6 +77,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     f = result["gap"]["force_rms_n"]
     print(f"force gap {f['before'] * 1000:.2f} -> {f['after'] * 1000:.2f} mN "
           f"(shrink {f['shrink'] * 100:.0f}%); report: {args.out / 'report.md'}")  # fmt: skip
+    m = result["gap"].get("force_rms_n_measured_floor")
+    if m:
+        print(f"against the measured noise floor ({m['floor'] * 1000:.2f} mN, white "
+              f"{m['white_floor'] * 1000:.2f}): {m['before'] * 1000:.2f} -> "
+              f"{m['after'] * 1000:.2f} mN (shrink {m['shrink'] * 100:.0f}%)")  # fmt: skip
     learned = result["gap"].get("force_rms_n_learned")
     if learned:
         print(f"with the learnt residual: {learned['after'] * 1000:.2f} mN (shrink "
