@@ -78,27 +78,38 @@ def rotation(q: np.ndarray) -> np.ndarray:
     )
 
 
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = _floats(a)
-    bw, bx, by, bz = _floats(b)
-    return np.array(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ]
+Quat = tuple[float, float, float, float]
+
+
+def quat_mul_floats(a: Quat | list[float], b: Quat | list[float]) -> Quat:
+    """The Hamilton product in Python floats (the estimator's hot path: no arrays)."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
     )
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.array(quat_mul_floats(_floats(a), _floats(b)))
+
+
+def rotation_vector_floats(x: float, y: float, z: float) -> Quat:
+    """The quaternion of a rotation vector (exact), in floats."""
+    x, y, z = float(x), float(y), float(z)
+    angle = math.sqrt(x * x + y * y + z * z)
+    if angle < 1e-12:
+        return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
+    s = math.sin(0.5 * angle) / angle
+    return (math.cos(0.5 * angle), s * x, s * y, s * z)
 
 
 def rotation_vector_quat(theta: np.ndarray) -> np.ndarray:
     """The quaternion of a rotation vector (exact)."""
-    x, y, z = _floats(theta)
-    angle = math.sqrt(x * x + y * y + z * z)
-    if angle < 1e-12:
-        return np.array([1.0, 0.5 * x, 0.5 * y, 0.5 * z])
-    s = math.sin(0.5 * angle) / angle
-    return np.array([math.cos(0.5 * angle), s * x, s * y, s * z])
+    return np.array(rotation_vector_floats(*_floats(theta)))
 
 
 def initial(
@@ -227,6 +238,7 @@ def predict_state(
 
 _DIAGONAL = np.arange(3)
 _NOISE_STATES = np.arange(3, 15)
+_IDENTITY = np.eye(N_ERRORS)
 
 
 def predict_covariance(
@@ -243,7 +255,7 @@ def predict_covariance(
     r = rotation(est.quaternion)
     f = specific_force_body - est.accel_bias_m_s2
     w = (rates_body - est.gyro_bias_rad_s) * dt
-    fx = np.eye(N_ERRORS)
+    fx = _IDENTITY.copy()
     i = _DIAGONAL
     fx[i, 3 + i] = dt
     fx[V_, TH_] = -(r @ skew(f)) * dt
@@ -252,7 +264,17 @@ def predict_covariance(
     fx[6 + i, 12 + i] = -dt
     p = fx @ est.covariance @ fx.T
     p[_NOISE_STATES, _NOISE_STATES] += _process_variances(noise) * dt
-    return dataclasses.replace(est, covariance=p)
+    # built directly: dataclasses.replace costs more than the products above
+    return Estimate(
+        est.time_us,
+        est.position_m,
+        est.velocity_m_s,
+        est.quaternion,
+        est.accel_bias_m_s2,
+        est.gyro_bias_rad_s,
+        p,
+        est.angular_velocity_body_rad_s,
+    )
 
 
 @functools.lru_cache(maxsize=8)
@@ -285,12 +307,15 @@ def predict(
 
 
 def _updated(est: Estimate, dx: np.ndarray, p_new: np.ndarray) -> Estimate:
-    q = quat_mul(est.quaternion, rotation_vector_quat(dx[TH_]))
+    qw, qx, qy, qz = quat_mul_floats(
+        est.quaternion.tolist(), rotation_vector_floats(dx[6], dx[7], dx[8])
+    )
+    n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
     return Estimate(
         time_us=est.time_us,
         position_m=est.position_m + dx[P_],
         velocity_m_s=est.velocity_m_s + dx[V_],
-        quaternion=q / math.sqrt(float(q @ q)),
+        quaternion=np.array((qw * n, qx * n, qy * n, qz * n)),
         accel_bias_m_s2=est.accel_bias_m_s2 + dx[BA_],
         gyro_bias_rad_s=est.gyro_bias_rad_s + dx[BG_],
         covariance=0.5 * (p_new + p_new.T),
@@ -395,20 +420,22 @@ def fuse_pose(
     # out: this runs at the capture system's rate.
     k = len(axes)
     p = est.covariance
-    hy = rotation(est.quaternion)[2, :]
+    w, x, y, z = est.quaternion.tolist()
+    hy = np.array((2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))  # R[2]
     ph = np.empty((N_ERRORS, k + 1))
     ph[:, :k] = p[:, axes]
     ph[:, k] = p[:, TH_] @ hy
     s = np.empty((k + 1, k + 1))
     s[:k, :] = ph[axes, :]
     s[k, :] = hy @ ph[TH_, :]
-    variance = np.full(k + 1, position_sd_m * position_sd_m)
-    variance[k] = yaw_sd_rad * yaw_sd_rad
-    s.flat[:: k + 2] += variance
-    innovation = np.empty(k + 1)
-    innovation[:k] = position_innovation_m
-    innovation[k] = (yaw_innovation_rad + math.pi) % (2.0 * math.pi) - math.pi
-    ratio = float(np.max(innovation * innovation / (gate_sd * gate_sd * s.flat[:: k + 2])))
+    position_var = position_sd_m * position_sd_m
+    s.flat[:: k + 2] += [position_var] * k + [yaw_sd_rad * yaw_sd_rad]
+    innovation = [*np.asarray(position_innovation_m).tolist()]
+    innovation.append((yaw_innovation_rad + math.pi) % (2.0 * math.pi) - math.pi)
+    gate2 = gate_sd * gate_sd
+    variances = s.flat[:: k + 2].tolist()
+    ratios = [nu * nu / (gate2 * var) for nu, var in zip(innovation, variances, strict=True)]
+    ratio = math.nan if any(r != r for r in ratios) else max(ratios)  # NaN is rejected too
     if not ratio <= 1.0:
         return Fused(est, ratio, False)
     gain = ph @ np.linalg.inv(s)

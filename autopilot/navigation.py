@@ -37,6 +37,7 @@ from autopilot.simlink import Step
 from autopilot.terrain import Terrain, terrain_update
 from simbridge.frames import geodetic_to_local, ned_to_enu, quat_ned_frd_to_enu_flu
 
+Vec3 = tuple[float, float, float]
 RESTING_SD_M = 0.0005  # how well a standing vehicle knows the surface under it
 BARO_REF_STEPS = 250.0  # the barometer's reference averages its offset over about a second
 # the covariance's prediction step (PX4's EKF2: 10 ms); a fusion between two uses the last
@@ -77,14 +78,15 @@ class Navigation:
         self.estimate: ekf.Estimate | None = None
         self.quality = Quality()
         # (time_us, displacement sum, rotation product) of the predictions alone
-        self._history: deque[tuple[int, np.ndarray, np.ndarray]] = deque(maxlen=HISTORY_STEPS)
-        self._moved = np.zeros(3)
+        # (floats: they change every step, and small arrays cost more than their sums)
+        self._history: deque[tuple[int, Vec3, ekf.Quat]] = deque(maxlen=HISTORY_STEPS)
+        self._moved: Vec3 = (0.0, 0.0, 0.0)
         self._steps = 0
         self._pending_dt = 0.0  # IMU time not yet in the covariance, and its sums
         self._baro_sum, self._baro_n = 0.0, 0  # barometer innovations since the last fusion
         self._pending_f = np.zeros(3)
         self._pending_w = np.zeros(3)
-        self._turned = np.array([1.0, 0.0, 0.0, 0.0])
+        self._turned: ekf.Quat = (1.0, 0.0, 0.0, 0.0)
         self._last_seen: dict[str, float] = {}
         self._mocap_fused_s: float | None = None  # the last pose that passed the gate
         self.terrain = Terrain()
@@ -179,10 +181,15 @@ class Navigation:
         if self._pending_dt >= COVARIANCE_PERIOD_S:
             self._sync()
         # what the prediction moved and turned, for measurements captured in the past
-        self._moved = self._moved + (predicted.position_m - before.position_m)
-        turn = ekf.rotation_vector_quat(predicted.angular_velocity_body_rad_s * dt)
-        turned = ekf.quat_mul(self._turned, turn)
-        self._turned = turned / np.linalg.norm(turned)
+        mx, my, mz = self._moved
+        px, py, pz = predicted.position_m.tolist()
+        bx, by, bz = before.position_m.tolist()
+        self._moved = (mx + (px - bx), my + (py - by), mz + (pz - bz))
+        wx, wy, wz = predicted.angular_velocity_body_rad_s.tolist()
+        turn = ekf.rotation_vector_floats(wx * dt, wy * dt, wz * dt)
+        qw, qx, qy, qz = ekf.quat_mul_floats(self._turned, turn)
+        n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        self._turned = (qw * n, qx * n, qy * n, qz * n)
         self._record(imu.time_us)
         t = imu.time_us * 1e-6
         p = self.params
@@ -213,7 +220,7 @@ class Navigation:
         return t - self._last_seen.get(source, -math.inf) <= self.params.source_timeout_s
 
     def _record(self, time_us: int) -> None:
-        self._history.append((time_us, self._moved.copy(), self._turned.copy()))
+        self._history.append((time_us, self._moved, self._turned))
 
     def _at_capture(self, capture_us: int) -> tuple[np.ndarray, np.ndarray]:
         """The filter's position and attitude at `capture_us`: the present estimate less what
@@ -226,9 +233,11 @@ class Navigation:
                 then = entry
                 break
         now = self._history[-1]
-        position = e.position_m - (now[1] - then[1])
-        back = ekf.quat_mul(now[2] * np.array([1.0, -1.0, -1.0, -1.0]), then[2])
-        return position, ekf.quat_mul(e.quaternion, back)
+        moved = [a - b for a, b in zip(now[1], then[1], strict=True)]
+        position = e.position_m - np.array(moved)
+        w, x, y, z = now[2]
+        back = ekf.quat_mul_floats((w, -x, -y, -z), then[2])
+        return position, np.array(ekf.quat_mul_floats(e.quaternion.tolist(), back))
 
     def _sync(self) -> None:
         """The covariance brought up to the present state's time."""
@@ -451,7 +460,8 @@ class Navigation:
         elif source != "baro" or self._standing:
             self._baro_ref_m += (offset - self._baro_ref_m) / BARO_REF_STEPS
         self._standing_before, self._standing = self._standing, False
-        tilt_cos = float(ekf.rotation(e.quaternion)[2, 2])
+        _, qx, qy, _ = e.quaternion.tolist()
+        tilt_cos = 1 - 2 * (qx * qx + qy * qy)  # R(q)[2, 2]
         if range_m is not None and p.rng_ctrl:
             height = range_m * tilt_cos
             sd = self._range_sd(range_m)
