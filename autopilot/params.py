@@ -245,7 +245,10 @@ class ParamStore:
         self.path = path
         self.values = {name: float32(spec.default) for name, spec in SPECS.items()}
         self.values.update({k: float32(v) for k, v in identity_defaults(identity).items()})
-        self._groups: dict[str, tuple[dict[str, float], Any]] = {}
+        self._groups: dict[str, tuple[int, Any]] = {}
+        # counts the changes through `set`: the flight loop asks every step whether anything
+        # changed, and comparing two dicts of every parameter costs more than the step's maths
+        self.version = 0
         self.saved: dict[str, float] = {}
         if path is not None and path.exists():
             self.saved = self._read(path)
@@ -280,6 +283,7 @@ class ParamStore:
         if why is not None:
             return why
         self.values[name] = float32(value)
+        self.version += 1
         if self.path is not None:
             self.saved[name] = self.values[name]
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -292,10 +296,10 @@ class ParamStore:
         """The settings dataclass of `group` with the current values (built again only when
         a value changed: the flight loop asks for some every step)."""
         cached = self._groups.get(group)
-        if cached is not None and cached[0] == self.values:
+        if cached is not None and cached[0] == self.version:
             return cached[1]
         settings = self._build(group)
-        self._groups[group] = (dict(self.values), settings)
+        self._groups[group] = (self.version, settings)
         return settings
 
     def _build(self, group: str) -> Any:

@@ -99,16 +99,16 @@ class Tuning:
 
     def __init__(self, config: AutopilotConfig) -> None:
         self.config = config
-        self.values: dict[str, float] = {}
+        self.version = -1  # the parameters' version these settings were built from
         self.model_key: tuple[str, float] | None = None
         self.model: GroundEffectModel | None = None
         self.refresh()
 
     def refresh(self) -> bool:
         store = self.config.params
-        if store.values == self.values:
+        if store.version == self.version:
             return False
-        self.values = dict(store.values)
+        self.version = store.version
         self.controller = store.controller()
         self.commander = store.commander()
         self.land_detector = store.land_detector()
