@@ -83,10 +83,11 @@ TILT_MAX_DEG = 15.0
 # - ArduCopter's MOT_THST_EXPO is that e (default 0.65; ESCs that linearise themselves
 #   0-0.2, its Motor Thrust Scaling page): 1.39 at the default and a 0.35 hover throttle
 #   (MOT_THST_HOVER's default), 1.08 at 0.2, 2 at e 1 (a pure square);
-# - the Crazyflie firmware's PWM-to-thrust model, a pwm^2 + b pwm per rotor (a 0.0915 N,
-#   b 0.0677 N, pwm in 0-1; Foerster 2015's identification): linear in pwm it would be 1.47
-#   about a 34 g vehicle's hover; a polynomial off by a share of its square term is a
-#   fraction of that either side of 1.
+# - a Crazyflie firmware's PWM-to-thrust model (power_distribution_cf2.c of the research
+#   forks: each rotor's force turned into PWM through thrust = a pwm^2 + b pwm, a 0.0915 N,
+#   b 0.0677 N, pwm in 0-1): read as linear in pwm it would be 1.47 about a 34 g vehicle's
+#   hover; a polynomial off by a share of its square term (a battery's sag, other
+#   propellers) is a fraction of that either side of 1.
 # A square law read against nearly linear rotors is the reverse (0.5). Physical: 0.5-2, the
 # two extremes; the fit goes to 0.25-3 so that a value beyond is seen and called implausible.
 GAMMA_PHYSICAL = (0.5, 2.0)
