@@ -135,6 +135,17 @@ def _cases() -> list[Case]:
             {"thrust_curve": {"gamma": 0.8}, "thrust_coefficient": {"scale": 1.05}},
         )
     )
+    # the hover missions' take-off, descent to 6 cm and landing move the thrust by 4% (std)
+    # about hover, which is enough (excitation z 23); a hover held still would not be (the
+    # curve leaves (gamma - 1)(T - W): tests/test_gap_thrust_curve.py)
+    c.append(
+        Case(
+            "thrust_curve_hover",
+            ({"name": "thrust_curve", "gamma": 1.3},),
+            {"thrust_curve": {"gamma": 1.3}},
+            kind="hover",
+        )
+    )
     for tag, b in (("a", [0.2, -0.1, 0.15]), ("b", [0.5, 0.3, -0.4])):
         c.append(
             Case(
