@@ -12,7 +12,11 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from simbridge.effects.actuators import motor_lag_step, thrust_axis_body
+from simbridge.effects.actuators import (
+    motor_lag_step,
+    thrust_axis_body,
+    thrust_curve_forces_n,
+)
 from simbridge.effects.drag import body_drag_n, rotor_drag_n, wind_velocity_m_s
 from simbridge.effects.ground import ground_effect_forces_n, thrust_gain
 from simbridge.effects.learned import learned_force_n
@@ -107,6 +111,10 @@ class Simulation:
         self._gex_force, self._outwash_force = _zero3(), _zero3()
         self._decay, self._asym = fx.thrust_decay, fx.rotor_asymmetry
         self._thrust_scale = 1.0
+        # a thrust curve about the vehicle file's hover thrust (W/4), applied to the modelled
+        # thrust before any C_T scale: s (W/4) (f/(W/4))^gamma is the curve about s W/4 of s f
+        self._curve = fx.thrust_curve.gamma if fx.thrust_curve else None
+        self._curve_pivot_n = 0.25 * vehicle.weight_n * self._c_t / vehicle.thrust_coefficient_n_s2
         # one set of down rays per rotor serves every effect that reads rotor heights
         lengths = [e.ray_length_m for e in (self._ge, self._gex) if e is not None]
         self._down_m = max(lengths + ([LEARNED_RAY_M] if self._learned else []), default=None)
@@ -209,12 +217,17 @@ class Simulation:
         return n
 
     def _forces(self, n: list[float]) -> Quad:
-        """Equation 3.5 with the thrust decay's scale and a rotor asymmetry, if any."""
+        """Equation 3.5 with the thrust curve, the thrust decay's scale and a rotor asymmetry,
+        if any."""
         if self._decay is None:
             f = rotor_forces_n(self._c_t, n)
+            pivot = self._curve_pivot_n
         else:
             self._thrust_scale = thrust_decay_scale(self._decay, self.time_since_takeoff_s)
             f = rotor_forces_n(self._c_t * self._thrust_scale, n)
+            pivot = self._curve_pivot_n * self._thrust_scale
+        if self._curve is not None:
+            f = thrust_curve_forces_n(f, self._curve, pivot)
         return f if self._asym is None else asymmetric_forces_n(self._asym, f)
 
     def _substep(self, f: Quad, tm: tuple[float, float, float, float]) -> None:

@@ -20,7 +20,8 @@ def result(**extra) -> dict:
 
 def test_the_new_cases_are_flown_in_valid_worlds():
     for name in ("far_ground_effect_lag", "three_effects", "ooc_ground_shape",
-                 "ooc_thrust_decay", "ooc_weak_rotor", "ooc_outwash"):  # fmt: skip
+                 "ooc_thrust_decay", "ooc_weak_rotor", "ooc_outwash",
+                 "thrust_curve_a", "thrust_curve_b", "thrust_curve_hover"):  # fmt: skip
         case = CASES[name]
         parse_effects([dict(e) for e in real_effects(case)], name)
         assert case.uncatalogued == name.startswith("ooc_")

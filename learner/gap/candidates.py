@@ -23,7 +23,7 @@ from scipy.signal import lfilter
 
 from learner.gap.flightdata import FlightData
 from simbridge.effects import EffectSet
-from simbridge.effects.actuators import thrust_axis_body
+from simbridge.effects.actuators import thrust_axis_body, thrust_curve_array
 from simbridge.effects.drag import BodyDragParams, RotorDragParams, body_drag_n, rotor_drag_n
 from simbridge.effects.ground import (
     CeilingEffectParams,
@@ -47,6 +47,12 @@ class Candidate:
     plausible_lo: tuple[float, ...] = ()
     plausible_hi: tuple[float, ...] = ()
     needs_accelerometer: bool = False  # models the accelerometer: no candidate without one
+    # the parameters at which it adds nothing (empty: zeros; a thrust curve's exponent: 1)
+    null: tuple[float, ...] = ()
+
+    def null_values(self) -> np.ndarray:
+        """The parameters at which the candidate adds nothing."""
+        return np.array(self.null, dtype=float) if self.null else np.zeros(len(self.params))
 
 
 # The reference vehicle the catalogue's magnitudes were chosen for: the thesis's nano
@@ -68,6 +74,24 @@ SIM_WIND_MAX_M_S = 30.0
 # The fit's range of a thrust axis's lean, well past the physical 3 deg (PHYSICAL), so that a
 # steady force read as a lean is seen at its value and called implausible
 TILT_MAX_DEG = 15.0
+# A thrust curve's exponent about hover, f = (W/4) (f_model / (W/4))^gamma: how far real rotors'
+# thrust departs from the model a log's thrust was converted with. A curve thrust = (1 - e) u
+# + e u^2 of a command u, read as linear, has the local exponent d ln f / d ln u = (1 - e +
+# 2 e u) / (1 - e + e u) about hover:
+# - PX4's THR_MDL_FAC is that e ("thrust = (1-factor) PWM + factor PWM^2", 0-1, default 0):
+#   a log read with e 0 of rotors that follow e 0.5 at a hover command of 0.4 is gamma 1.29;
+# - ArduCopter's MOT_THST_EXPO is that e (default 0.65; ESCs that linearise themselves
+#   0-0.2, its Motor Thrust Scaling page): 1.39 at the default and a 0.35 hover throttle
+#   (MOT_THST_HOVER's default), 1.08 at 0.2, 2 at e 1 (a pure square);
+# - a Crazyflie firmware's PWM-to-thrust model (power_distribution_cf2.c of the research
+#   forks: each rotor's force turned into PWM through thrust = a pwm^2 + b pwm, a 0.0915 N,
+#   b 0.0677 N, pwm in 0-1): read as linear in pwm it would be 1.47 about a 34 g vehicle's
+#   hover; a polynomial off by a share of its square term (a battery's sag, other
+#   propellers) is a fraction of that either side of 1.
+# A square law read against nearly linear rotors is the reverse (0.5). Physical: 0.5-2, the
+# two extremes; the fit goes to 0.25-3 so that a value beyond is seen and called implausible.
+GAMMA_PHYSICAL = (0.5, 2.0)
+GAMMA_FIT = (0.25, 3.0)
 
 REFERENCE: tuple[Candidate, ...] = (
     Candidate("ground_effect", ("rho",), ("1",), (0.01,), (RHO_MAX,), (1.0,), ("ground_effect",)),
@@ -90,6 +114,11 @@ REFERENCE: tuple[Candidate, ...] = (
     Candidate(
         "thrust_tilt", ("ax", "ay"), ("deg",) * 2, (-TILT_MAX_DEG,) * 2, (TILT_MAX_DEG,) * 2,
         (0.5,) * 2, ("thrust_tilt",),
+    ),
+    # typical: 0.1 from the null 1 (a linear model read against e 0.2 at hover 0.4: 1.09)
+    Candidate(
+        "thrust_curve", ("gamma",), ("1",), (GAMMA_FIT[0],), (GAMMA_FIT[1],), (0.1,),
+        ("thrust_curve",), null=(1.0,),
     ),
     Candidate(
         "sensor_bias", ("bx", "by", "bz"), ("m/s^2",) * 3, (-BIAS_MAX_M_S2,) * 3,
@@ -150,6 +179,15 @@ PHYSICAL: dict[str, tuple[tuple[float, ...], tuple[float, ...], str]] = {
         (3.0,) * 2,
         "a thrust axis leaning more than 3 deg from the body's z: a frame bent or an IMU "
         "mounted that far askew is seen on the bench; rather a force in the world (wind)",
+    ),
+    # a thrust curve converted with the wrong law: from a square law read against nearly
+    # linear rotors (0.5) to a linear one read against a pure square (2); sources above
+    "thrust_curve": (
+        (GAMMA_PHYSICAL[0],),
+        (GAMMA_PHYSICAL[1],),
+        "a thrust curve steeper than a pure square law of the command or flatter than its "
+        "square root: thrust in the wrong units or the wrong vehicle rather than an ESC's "
+        "curve",
     ),
     # a calibrated MEMS IMU: offsets of 20-70 mg (BMI088 20 mg, MPU-6050 60 mg) before the
     # estimator removes them; 0.1 g is beyond a working accelerometer's
@@ -291,6 +329,8 @@ def nominal_values(effects: EffectSet, vehicle: Vehicle | None = None) -> Values
         out["motor_lag"] = np.array([effects.motor_lag.time_constant_s])
     if effects.thrust_tilt:
         out["thrust_tilt"] = np.array(effects.thrust_tilt.lean_deg)
+    if effects.thrust_curve:
+        out["thrust_curve"] = np.array([effects.thrust_curve.gamma])
     s = effects.thrust_coefficient.scale if effects.thrust_coefficient else 1.0
     k = effects.mass_error.scale if effects.mass_error else 1.0
     if s != 1.0 or k != 1.0:
@@ -303,19 +343,25 @@ def nominal_values(effects: EffectSet, vehicle: Vehicle | None = None) -> Values
 
 
 def rotor_forces_n(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
-    """(N, 4) mean rotor thrusts over each period, through motor lag and the C_T scale."""
+    """(N, 4) mean rotor thrusts over each period, through motor lag, the thrust curve about
+    a quarter of the weight and the C_T scale (after the curve, as the simulator applies it)."""
     n = d.commands_rad_s
     c_t = vehicle.thrust_coefficient_n_s2
-    if "thrust_mass" in values:
-        c_t = c_t * (1.0 + values["thrust_mass"][0])
+    scale = 1.0 + float(values["thrust_mass"][0]) if "thrust_mass" in values else 1.0
+    gamma = float(values["thrust_curve"][0]) if "thrust_curve" in values else None
+    pivot_n = 0.25 * vehicle.weight_n
     if "motor_lag" not in values:
-        return c_t * n * n
+        f = c_t * n * n
+        return scale * (f if gamma is None else thrust_curve_array(f, gamma, pivot_n))
     # exact first-order lag of commands held over each period, at the physics step
     sub = d.substeps
     a = np.exp(-(d.dt_s / sub) / values["motor_lag"][0])
     u = np.repeat(n, sub, axis=0)
     y = lfilter([1.0 - a], [1.0, -a], u, axis=0, zi=(a * n[:1]))[0]
-    return c_t * (y * y).reshape(len(n), sub, 4).mean(axis=1)
+    f = c_t * y * y
+    if gamma is not None:
+        f = thrust_curve_array(f, gamma, pivot_n)
+    return scale * f.reshape(len(n), sub, 4).mean(axis=1)
 
 
 def world_force(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
@@ -401,6 +447,8 @@ def to_world_effects(values: Values, vehicle: Vehicle | None = None) -> list[dic
             out.append({"name": "thrust_coefficient", "scale": 1.0 + x[0]})
         elif name == "thrust_tilt":
             out.append({"name": name, "lean_deg": x[:2]})
+        elif name == "thrust_curve":
+            out.append({"name": name, "gamma": x[0]})
         elif name == "sensor_bias":
             out.append({"name": name, "accel_bias_m_s2": x})
         elif name == "sensor_latency":

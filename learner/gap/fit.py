@@ -102,6 +102,8 @@ def start_values(name: str, nominal: Values, cat: dict[str, Candidate] | None = 
     c = (cat or CANDIDATES)[name]
     if name in nominal:
         return np.array(nominal[name], dtype=float)
+    if c.null:  # a thrust curve: from its null exponent 1
+        return c.null_values()
     if name in (
         "wind",
         "thrust_mass",
@@ -294,7 +296,7 @@ def probe_values(name: str, nominal: Values, cat: dict[str, Candidate] | None = 
     c = (cat or CANDIDATES)[name]
     if name in nominal:
         return np.asarray(nominal[name], dtype=float) + 0.5 * np.asarray(c.typical)
-    return np.asarray(c.typical, dtype=float)
+    return c.null_values() + np.asarray(c.typical, dtype=float)
 
 
 def excitation_z(problem: Problem, name: str) -> float:
@@ -326,11 +328,12 @@ def collinearity_r2(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def null_values(name: str, nominal: Values) -> np.ndarray:
-    """The candidate's parameters when it adds nothing: the nominal world's, else zeros (no
-    ground/ceiling gain, no wall gain, drag, wind, lag, scale error, bias or delay)."""
+    """The candidate's parameters when it adds nothing: the nominal world's, else its null
+    (zeros: no ground/ceiling gain, no wall gain, drag, wind, lag, scale error, bias or delay;
+    a thrust curve's exponent 1)."""
     if name in nominal:
         return np.asarray(nominal[name], dtype=float)
-    return np.zeros(len(CANDIDATES[name].params))
+    return CANDIDATES[name].null_values()
 
 
 def added_p(f: Fit, name: str, nominal: Values) -> float:
@@ -358,14 +361,14 @@ def bound_hits(name: str, value: np.ndarray, cat: dict[str, Candidate] | None = 
     """The parameters sitting on a bound: a compensating, implausible solution (thrust scale
     0.5 against a 4.9 m/s^2 bias) on which the Wald test does not hold, or an effect stronger
     than the catalogue's range. A non-negative quantity's floor (no drag along z, the shortest
-    lag) is no such bound."""
+    lag) is no such bound; a lower bound below the null (a wind's, a thrust curve's) is."""
     c = (cat or CANDIDATES)[name]
-    lo, hi = np.asarray(c.lo), np.asarray(c.hi)
+    lo, hi, null = np.asarray(c.lo), np.asarray(c.hi), c.null_values()
     tol = 1e-3 * (hi - lo)
     v = np.asarray(value)
     out = []
     for i, p in enumerate(c.params):
-        side = "low" if lo[i] < 0.0 and v[i] - lo[i] <= tol[i] else None
+        side = "low" if lo[i] < null[i] and v[i] - lo[i] <= tol[i] else None
         side = "high" if hi[i] - v[i] <= tol[i] else side
         if side:
             bound = float(lo[i] if side == "low" else hi[i])

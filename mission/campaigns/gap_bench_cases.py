@@ -114,6 +114,38 @@ def _cases() -> list[Case]:
                 {"thrust_tilt": dict(zip(("ax", "ay"), lean, strict=True))},
             )
         )
+    # a thrust curve: rotors whose thrust grows faster (a) or slower (b) than modelled away
+    # from hover, (W/4) (f/(W/4))^gamma per rotor (ArduCopter's default MOT_THST_EXPO read as
+    # linear is 1.39); the vertical legs take the thrust from about 0.8 to 1.2 weights. b beside
+    # a C_T 5% high: the curve's (gamma - 1)(T - W) against the scale's share of T
+    c.append(
+        Case(
+            "thrust_curve_a",
+            ({"name": "thrust_curve", "gamma": 1.3},),
+            {"thrust_curve": {"gamma": 1.3}},
+        )
+    )
+    c.append(
+        Case(
+            "thrust_curve_b",
+            (
+                {"name": "thrust_curve", "gamma": 0.8},
+                {"name": "thrust_coefficient", "scale": 1.05},
+            ),
+            {"thrust_curve": {"gamma": 0.8}, "thrust_coefficient": {"scale": 1.05}},
+        )
+    )
+    # the hover missions' take-off, descent to 6 cm and landing move the thrust by 4% (std)
+    # about hover, which is enough (excitation z 23); a hover held still would not be (the
+    # curve leaves (gamma - 1)(T - W): tests/test_gap_thrust_curve.py)
+    c.append(
+        Case(
+            "thrust_curve_hover",
+            ({"name": "thrust_curve", "gamma": 1.3},),
+            {"thrust_curve": {"gamma": 1.3}},
+            kind="hover",
+        )
+    )
     for tag, b in (("a", [0.2, -0.1, 0.15]), ("b", [0.5, 0.3, -0.4])):
         c.append(
             Case(

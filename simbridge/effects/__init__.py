@@ -14,6 +14,7 @@ from simbridge.effects.actuators import (
     MassErrorParams,
     MotorLagParams,
     ThrustCoefficientParams,
+    ThrustCurveParams,
     ThrustTiltParams,
 )
 from simbridge.effects.drag import BodyDragParams, RotorDragParams, WindParams
@@ -43,6 +44,7 @@ class EffectSet:
     thrust_coefficient: ThrustCoefficientParams | None = None
     mass_error: MassErrorParams | None = None
     thrust_tilt: ThrustTiltParams | None = None
+    thrust_curve: ThrustCurveParams | None = None
     sensor_latency: SensorLatencyParams | None = None
     sensor_bias: SensorBiasParams | None = None
     learned_residual: LearnedResidualParams | None = None  # what a gap diagnosis learnt
@@ -68,6 +70,7 @@ PARAMS_BY_NAME: dict[str, type] = {
     "thrust_coefficient": ThrustCoefficientParams,
     "mass_error": MassErrorParams,
     "thrust_tilt": ThrustTiltParams,
+    "thrust_curve": ThrustCurveParams,
     "sensor_latency": SensorLatencyParams,
     "sensor_bias": SensorBiasParams,
     "learned_residual": LearnedResidualParams,

@@ -1,10 +1,13 @@
 """Actuator and inertial errors: motor lag, thrust-coefficient error, mass error, a thrust
-axis leaning from the body's z axis (a bent frame, motors mounted askew)."""
+axis leaning from the body's z axis (a bent frame, motors mounted askew), a thrust curve (the
+rotors' thrust growing faster or slower than the modelled C_T n^2 away from hover)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from simbridge.config import param
 
@@ -55,3 +58,34 @@ def thrust_axis_body(lean_x_deg: float, lean_y_deg: float) -> tuple[float, float
     ThrustTiltParams' +-30 deg the vertical part stays above 0.7)."""
     sx, sy = math.sin(math.radians(lean_x_deg)), math.sin(math.radians(lean_y_deg))
     return (sx, sy, math.sqrt(1.0 - sx * sx - sy * sy))
+
+
+@dataclass(frozen=True)
+class ThrustCurveParams:
+    """Each rotor's true thrust departs from the modelled f = C_T n^2 as a power law about
+    hover: (W/4) (f / (W/4))^gamma, W the vehicle's weight. Hover is unchanged; away from it
+    the thrust grows faster (gamma > 1) or slower than modelled: a logged command converted
+    to thrust by a linear model while the ESC and propeller give a curve (PX4's
+    THR_MDL_FAC, ArduCopter's MOT_THST_EXPO), or a PWM-to-thrust polynomial that is off."""
+
+    gamma: float = param(1.0, lo=0.2, hi=4.0, doc="exponent of the thrust about hover (1: none)")
+
+
+def thrust_curve_forces_n(
+    rotor_forces_n: tuple[float, float, float, float], gamma: float, pivot_n: float
+) -> tuple[float, float, float, float]:
+    """The four rotors' true thrusts pivot_n (f_i / pivot_n)^gamma for modelled thrusts f_i
+    (pivot_n: a quarter of the weight; a rotor at it is unchanged, one at rest gives 0)."""
+    f0, f1, f2, f3 = rotor_forces_n
+    inv = 1.0 / pivot_n
+    return (
+        pivot_n * (f0 * inv) ** gamma,
+        pivot_n * (f1 * inv) ** gamma,
+        pivot_n * (f2 * inv) ** gamma,
+        pivot_n * (f3 * inv) ** gamma,
+    )
+
+
+def thrust_curve_array(rotor_forces_n: np.ndarray, gamma: float, pivot_n: float) -> np.ndarray:
+    """`thrust_curve_forces_n` over an array of modelled rotor thrusts (any shape)."""
+    return pivot_n * (np.maximum(rotor_forces_n, 0.0) / pivot_n) ** gamma
