@@ -145,3 +145,31 @@ def test_a_thrust_scale_against_an_accelerometer_bias_is_a_cancelling_pair(tmp_p
     assert pairs[0]["cosine"] < -0.9
     issues = set_problems(problem, fitted)
     assert set(issues["implausible"]) == {"thrust_mass", "sensor_bias"}
+
+
+def test_an_effect_that_differs_between_flights_is_not_named_with_confidence(
+    tmp_path: Path,
+) -> None:
+    """A thrust curve is a property of the vehicle: flights that ask for exponents of 0.7 and
+    0.4 (as a neighbour's downwash, read as a curve, does: swaps of the neural-swarm data ask
+    for 0.51, 0.35 and 0.25) pool to a plausible value, but refitted on one flight alone it
+    leaves the physical range (0.5-2), and the verdict says so."""
+    world = world_file(tmp_path / "world.yaml")
+    gammas = {0: 0.7, 1: 0.4, 2: 0.55}
+    logs = [
+        write_log(
+            synthetic_log(f"f{s}", NANO, world, {"thrust_curve": np.array([g])}, s, seconds=20.0),
+            tmp_path / f"f{s}.csv",
+        )
+        for s, g in gammas.items()
+    ]
+    result = run_diagnosis(logs[:2], logs[2:], str(world), tmp_path / "out", 2, replay=False)
+    curve = result["effects"]["thrust_curve"]
+    assert curve["status"] == "present", curve
+    per_flight = {row["flight"]: row["values"][0] for row in curve["per_flight"]}
+    assert curve["parameters"]["gamma"]["value"] >= 0.5  # pooled: plausible
+    assert per_flight["f1"] < 0.5  # alone: outside the physical range
+    assert curve["confident"] is False
+    assert "f1" in curve["confidence_note"] and "physical range" in curve["confidence_note"]
+    report = (tmp_path / "out/report.md").read_text()
+    assert "| thrust_curve | present |" in report and "not named with confidence" in report

@@ -237,7 +237,10 @@ def _markdown(
             else f"{p} {v['value']:.4g} {v['unit']} (refused: no interval)"
             for p, v in (e.get("parameters") or {}).items()
         )
-        lines.append(f"| {effect} | {e['status']} | {params} | {e.get('why', '')} |")
+        note = e.get("why", "")
+        if e["status"] == "present" and not e.get("confident", True):
+            note = f"not named with confidence: {e.get('confidence_note', '')}"
+        lines.append(f"| {effect} | {e['status']} | {params} | {note} |")
     g = diagnosis.gap
     lines += ["", "## How far", ""]
     f = g["force_rms_n"]

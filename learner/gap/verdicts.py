@@ -304,8 +304,9 @@ def per_flight_values(
     A wind's direction is the one it blows towards, counterclockwise from world x (east)."""
     if not best.names:
         return
-    fits = [(d.name, gapfit.fit(gapfit.problem_for([d], nominal, vehicle), best.names,
-                                max_nfev=60, start=best.values)) for d in flights]  # fmt: skip
+    problems = [(d.name, gapfit.problem_for([d], nominal, vehicle)) for d in flights]
+    fits = [(n, gapfit.fit(p, best.names, max_nfev=60, start=best.values)) for n, p in problems]
+    cat = problems[0][1].catalogue
     for name in best.names:
         for effect in CANDIDATES[name].effects:
             e = effects[effect]
@@ -320,6 +321,32 @@ def per_flight_values(
                     row["towards_deg"] = float(np.degrees(np.arctan2(v[1], v[0])) % 360.0)
                 rows.append(row)
             e["per_flight"] = rows
+            _mark_disagreeing_flights(e, name, fits, cat)
+
+
+def _mark_disagreeing_flights(
+    e: dict[str, Any], name: str, fits: list[tuple[str, gapfit.Fit]], cat: dict
+) -> None:
+    """A property of the vehicle or its world holds on every flight: refitted on one flight
+    alone outside its physical range, the effect carries something that differs between
+    flights (an effect outside the catalogue: a neighbour's downwash, a gust), so it is not
+    named with confidence."""
+    outside = [
+        (flight, bad)
+        for flight, f in fits
+        for bad in implausible_parameters(name, f.values[name], cat)
+    ]
+    if not outside:
+        return
+    e["confident"] = False
+    shown = ", ".join(f"{b['parameter']} {b['value']:.4g} on {flight}" for flight, b in outside)
+    lo, hi = outside[0][1]["range"]
+    note = (
+        f"refitted on each flight alone it leaves its physical range [{lo:g}, {hi:g}] ({shown}): "
+        "the flights disagree beyond the vehicle's physics, so it may stand in for an effect "
+        "outside the catalogue that differs between them"
+    )
+    e["confidence_note"] = "; ".join(filter(None, [e.get("confidence_note"), note]))
 
 
 def mark_confidence(effects: dict[str, dict[str, Any]], unexplained: dict[str, Any]) -> None:

@@ -71,6 +71,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         params = ", ".join(f"{p} {v['value']:.4g}" for p, v in (e.get("parameters") or {}).items())
         shown = f" ({params})" if params and e["status"] == "present" else ""
         why = f" ({e['why']})" if e["status"] in ("at bound", "implausible") else ""
+        if e["status"] == "present" and not e.get("confident", True):
+            why = f"; not confident: {e.get('confidence_note', '')}"
         print(f"{effect:20s} {e['status']}{shown}{why}")
     for note in result.get("notes") or []:
         print(f"note: {note}")
