@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simbridge.frames import Quat, quat_multiply
 from simbridge.vehicle import GRAVITY_M_S2
 
 GRAVITY_WORLD = np.array([0.0, 0.0, -GRAVITY_M_S2])
@@ -78,23 +79,8 @@ def rotation(q: np.ndarray) -> np.ndarray:
     )
 
 
-Quat = tuple[float, float, float, float]
-
-
-def quat_mul_floats(a: Quat | list[float], b: Quat | list[float]) -> Quat:
-    """The Hamilton product in Python floats (the estimator's hot path: no arrays)."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.array(quat_mul_floats(_floats(a), _floats(b)))
+    return np.array(quat_multiply(tuple(_floats(a)), tuple(_floats(b))))
 
 
 def rotation_vector_floats(x: float, y: float, z: float) -> Quat:
@@ -306,8 +292,8 @@ def predict(
 
 
 def _updated(est: Estimate, dx: np.ndarray, p_new: np.ndarray) -> Estimate:
-    qw, qx, qy, qz = quat_mul_floats(
-        est.quaternion.tolist(), rotation_vector_floats(dx[6], dx[7], dx[8])
+    qw, qx, qy, qz = quat_multiply(
+        tuple(est.quaternion.tolist()), rotation_vector_floats(dx[6], dx[7], dx[8])
     )
     n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
     return Estimate(
@@ -429,7 +415,7 @@ def fuse_pose(
     s[k, :] = hy @ ph[TH_, :]
     position_var = position_sd_m * position_sd_m
     s.flat[:: k + 2] += [position_var] * k + [yaw_sd_rad * yaw_sd_rad]
-    innovation = [*np.asarray(position_innovation_m).tolist()]
+    innovation = np.asarray(position_innovation_m, dtype=float).tolist()
     innovation.append((yaw_innovation_rad + math.pi) % (2.0 * math.pi) - math.pi)
     gate2 = gate_sd * gate_sd
     variances = s.flat[:: k + 2].tolist()

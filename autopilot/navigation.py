@@ -14,7 +14,6 @@ below (the ground-effect model's input) is the estimated altitude minus the terr
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -32,12 +31,12 @@ from autopilot.estimator_params import (
     HEIGHT_NAMES,
     EstimatorParams,
 )
+from autopilot.nav_history import PredictionHistory
 from autopilot.sensors import Imu, imu_from, pressure_altitude_m, range_reading
 from autopilot.simlink import Step
 from autopilot.terrain import Terrain, terrain_update
 from simbridge.frames import geodetic_to_local, ned_to_enu, quat_ned_frd_to_enu_flu
 
-Vec3 = tuple[float, float, float]
 RESTING_SD_M = 0.0005  # how well a standing vehicle knows the surface under it
 BARO_REF_STEPS = 250.0  # the barometer's reference averages its offset over about a second
 # the covariance's prediction step (PX4's EKF2: 10 ms); a fusion between two uses the last
@@ -77,16 +76,12 @@ class Navigation:
         self.noise = ekf.ProcessNoise()
         self.estimate: ekf.Estimate | None = None
         self.quality = Quality()
-        # (time_us, displacement sum, rotation product) of the predictions alone
-        # (floats: they change every step, and small arrays cost more than their sums)
-        self._history: deque[tuple[int, Vec3, ekf.Quat]] = deque(maxlen=HISTORY_STEPS)
-        self._moved: Vec3 = (0.0, 0.0, 0.0)
+        self._history = PredictionHistory(HISTORY_STEPS)  # for delayed measurements
         self._steps = 0
         self._pending_dt = 0.0  # IMU time not yet in the covariance, and its sums
         self._baro_sum, self._baro_n = 0.0, 0  # barometer innovations since the last fusion
         self._pending_f = np.zeros(3)
         self._pending_w = np.zeros(3)
-        self._turned: ekf.Quat = (1.0, 0.0, 0.0, 0.0)
         self._last_seen: dict[str, float] = {}
         self._mocap_fused_s: float | None = None  # the last pose that passed the gate
         self.terrain = Terrain()
@@ -181,16 +176,7 @@ class Navigation:
         if self._pending_dt >= COVARIANCE_PERIOD_S:
             self._sync()
         # what the prediction moved and turned, for measurements captured in the past
-        mx, my, mz = self._moved
-        px, py, pz = predicted.position_m.tolist()
-        bx, by, bz = before.position_m.tolist()
-        self._moved = (mx + (px - bx), my + (py - by), mz + (pz - bz))
-        wx, wy, wz = predicted.angular_velocity_body_rad_s.tolist()
-        turn = ekf.rotation_vector_floats(wx * dt, wy * dt, wz * dt)
-        qw, qx, qy, qz = ekf.quat_mul_floats(self._turned, turn)
-        n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        self._turned = (qw * n, qx * n, qy * n, qz * n)
-        self._record(imu.time_us)
+        self._history.advance(before, predicted, dt, imu.time_us)
         t = imu.time_us * 1e-6
         p = self.params
         if p.ev_ctrl and "ODOMETRY" in step.new:
@@ -218,26 +204,6 @@ class Navigation:
 
     def _alive(self, source: str, t: float) -> bool:
         return t - self._last_seen.get(source, -math.inf) <= self.params.source_timeout_s
-
-    def _record(self, time_us: int) -> None:
-        self._history.append((time_us, self._moved, self._turned))
-
-    def _at_capture(self, capture_us: int) -> tuple[np.ndarray, np.ndarray]:
-        """The filter's position and attitude at `capture_us`: the present estimate less what
-        the predictions moved and turned since."""
-        e = self.estimate
-        assert e is not None
-        then = self._history[0]
-        for entry in reversed(self._history):
-            if entry[0] <= capture_us:
-                then = entry
-                break
-        now = self._history[-1]
-        moved = [a - b for a, b in zip(now[1], then[1], strict=True)]
-        position = e.position_m - np.array(moved)
-        w, x, y, z = now[2]
-        back = ekf.quat_mul_floats((w, -x, -y, -z), then[2])
-        return position, np.array(ekf.quat_mul_floats(e.quaternion.tolist(), back))
 
     def _sync(self) -> None:
         """The covariance brought up to the present state's time."""
@@ -295,7 +261,7 @@ class Navigation:
         self.estimate = ekf.initial(imu.time_us, position, q, position_sd, attitude_sd)
         self._baro_ref_m = pressure_altitude_m(imu.pressure_hpa) - position[2]
         self._aligned_z_m = float(position[2])
-        self._record(imu.time_us)
+        self._history.record(imu.time_us)
         self.events.append(
             f"estimator aligned ({', '.join(self.sources())}; height {self.height_source})"
         )
@@ -322,7 +288,7 @@ class Navigation:
     def _fuse_mocap(self, m: dict, t: float) -> None:
         p = self.params
         self._last_seen["motion capture"] = t
-        position, attitude = self._at_capture(m["time_usec"])
+        position, attitude = self._history.at_capture(self.estimate, m["time_usec"])
         measured = np.array(ned_to_enu((m["x"], m["y"], m["z"])))
         axes = ([0, 1] if p.ev_ctrl & EV_HPOS else []) + (
             [2] if p.ev_ctrl & EV_VPOS and self.height_source == "vision" else []
@@ -360,7 +326,7 @@ class Navigation:
         if g["fix_type"] < 3:
             return
         self._last_seen["GPS"] = t
-        position, _ = self._at_capture(g["time_usec"])
+        position, _ = self._history.at_capture(self.estimate, g["time_usec"])
         axes = ([0, 1] if p.gps_ctrl & GPS_POS else []) + (
             [2] if p.gps_ctrl & GPS_ALT and self.height_source == "gps" else []
         )

@@ -32,8 +32,8 @@ from simbridge.frames import (
     quat_to_matrix,
     rotate_transposed,
 )
-from simbridge.physics import EffectForces, VehicleState
 from simbridge.sensor_noise import SensorErrors
+from simbridge.sim_state import EffectForces, VehicleState
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 from simbridge.wire import PacketSequence, WirePacker
 from simbridge.world import World

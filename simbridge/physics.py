@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
 
 from simbridge.effects.actuators import (
     motor_lag_step,
@@ -28,48 +27,17 @@ from simbridge.effects.uncatalogued import (
     outwash_force_n,
     thrust_decay_scale,
 )
-from simbridge.frames import Quat, Vec3, xyzw_to_wxyz
+from simbridge.frames import Vec3, xyzw_to_wxyz
 from simbridge.pybullet_quiet import pybullet as pb
 from simbridge.pybullet_world import WORLD_GROUP, build_body, build_surfaces, surface_footprints
 from simbridge.rotors import Quad, rotor_forces_n, thrust_and_moments
+from simbridge.sim_state import EffectForces, VehicleState
 from simbridge.surface_rays import VerticalRays
 from simbridge.vehicle import Vehicle
 from simbridge.world import World
 
 NO_HIT = math.inf
 LEARNED_RAY_M = 3.0  # a learnt residual's height rays: beyond, its feature is capped anyway
-
-
-@dataclass(frozen=True)
-class VehicleState:
-    """The true state after a control step (world x east, y north, z up; body FLU)."""
-
-    time_s: float
-    position_m: Vec3
-    quaternion: Quat  # (w, x, y, z), body to world
-    velocity_m_s: Vec3  # world frame
-    angular_velocity_body_rad_s: Vec3  # body frame
-    acceleration_m_s2: Vec3  # world frame, mean over the last control period
-    rotor_speeds_rad_s: Quad  # actual (after motor lag)
-    range_m: float  # downward range sensor: distance along body -z to a surface, inf if none
-
-
-@dataclass(frozen=True)
-class EffectForces:
-    """The true effect forces of the last physics step, world frame unless stated."""
-
-    rotor_heights_m: Quad  # height of each rotor above the surface below it (inf: none)
-    ground_effect_rotor_n: Quad  # equation 3.4 per rotor, vertical
-    ground_effect_n: Vec3
-    ceiling_effect_n: Vec3
-    wall_effect_n: Vec3
-    drag_n: Vec3  # rotor drag + body drag
-    wind_m_s: Vec3
-    learned_n: Vec3 = (0.0, 0.0, 0.0)  # a gap diagnosis's learnt residual
-    # outside the catalogue (simbridge/effects/uncatalogued.py)
-    ground_effect_exponential_n: Vec3 = (0.0, 0.0, 0.0)
-    outwash_n: Vec3 = (0.0, 0.0, 0.0)
-    thrust_scale: float = 1.0  # thrust_decay's C_T scale
 
 
 def _zero3() -> list[float]:

@@ -9,7 +9,8 @@ import pytest
 
 from simbridge.effects.sensor_errors import SensorBiasParams, SensorLatencyParams
 from simbridge.hil import HilEncoder, mavlink
-from simbridge.physics import VehicleState, with_effects
+from simbridge.physics import with_effects
+from simbridge.sim_state import VehicleState
 from simbridge.vehicle import load_vehicle
 from simbridge.world import SensorRates, load_world, with_ideal_sensors
 

@@ -1,0 +1,41 @@
+"""What the simulator reports of one vehicle after a step: its true state and the true forces
+of the world's effects (`simbridge.physics` fills them; the HIL encoder sends them)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from simbridge.frames import Quat, Vec3
+from simbridge.rotors import Quad
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """The true state after a control step (world x east, y north, z up; body FLU)."""
+
+    time_s: float
+    position_m: Vec3
+    quaternion: Quat  # (w, x, y, z), body to world
+    velocity_m_s: Vec3  # world frame
+    angular_velocity_body_rad_s: Vec3  # body frame
+    acceleration_m_s2: Vec3  # world frame, mean over the last control period
+    rotor_speeds_rad_s: Quad  # actual (after motor lag)
+    range_m: float  # downward range sensor: distance along body -z to a surface, inf if none
+
+
+@dataclass(frozen=True)
+class EffectForces:
+    """The true effect forces of the last physics step, world frame unless stated."""
+
+    rotor_heights_m: Quad  # height of each rotor above the surface below it (inf: none)
+    ground_effect_rotor_n: Quad  # equation 3.4 per rotor, vertical
+    ground_effect_n: Vec3
+    ceiling_effect_n: Vec3
+    wall_effect_n: Vec3
+    drag_n: Vec3  # rotor drag + body drag
+    wind_m_s: Vec3
+    learned_n: Vec3 = (0.0, 0.0, 0.0)  # a gap diagnosis's learnt residual
+    # outside the catalogue (simbridge/effects/uncatalogued.py)
+    ground_effect_exponential_n: Vec3 = (0.0, 0.0, 0.0)
+    outwash_n: Vec3 = (0.0, 0.0, 0.0)
+    thrust_scale: float = 1.0  # thrust_decay's C_T scale
