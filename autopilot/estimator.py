@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simbridge.frames import Quat, quat_multiply
+from simbridge.frames import Quat, Vec3, quat_multiply
 from simbridge.vehicle import GRAVITY_M_S2
 
 GRAVITY_WORLD = np.array([0.0, 0.0, -GRAVITY_M_S2])
@@ -164,7 +164,10 @@ def matrix_quat(r: np.ndarray) -> np.ndarray:
 
 
 def predict_state(
-    est: Estimate, time_us: int, specific_force_body: np.ndarray, rates_body: np.ndarray
+    est: Estimate,
+    time_us: int,
+    specific_force_body: Vec3 | np.ndarray,
+    rates_body: Vec3 | np.ndarray,
 ) -> Estimate:
     """Propagate the state (not its covariance) over the IMU sample that ended at `time_us`
     (its mean over the period): every control step, as PX4's output predictor does. Written
@@ -176,9 +179,9 @@ def predict_state(
     w0, x0, y0, z0 = est.quaternion.tolist()
     bax, bay, baz = est.accel_bias_m_s2.tolist()
     bgx, bgy, bgz = est.gyro_bias_rad_s.tolist()
-    fx, fy, fz = specific_force_body.tolist()
+    fx, fy, fz = specific_force_body
     fx, fy, fz = fx - bax, fy - bay, fz - baz
-    wx, wy, wz = rates_body.tolist()
+    wx, wy, wz = rates_body
     wx, wy, wz = wx - bgx, wy - bgy, wz - bgz
     # world acceleration: R(q) f + g
     ax = (
@@ -329,6 +332,15 @@ def correct_states(
     """`correct` for a measurement of error states themselves (h selects `states`): the same
     update without the products by h."""
     p = est.covariance
+    if len(states) == 1:  # a scalar: the same arithmetic without indexing and inverting arrays
+        ph1 = p[:, states[0]]
+        s1 = float(ph1[states[0]]) + float(variance[0])
+        nu = float(innovation[0])
+        ratio = nu * nu / (gate_sd * gate_sd * s1)
+        if not ratio <= 1.0:  # NaN is rejected too
+            return Fused(est, ratio, False)
+        k1 = ph1 * (1.0 / s1)
+        return Fused(_updated(est, k1 * nu, p - np.outer(k1, ph1)), ratio, True)
     ph = p[:, states]
     s = ph[states, :]
     m = len(states)

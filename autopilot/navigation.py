@@ -107,12 +107,11 @@ class Navigation:
     def state(self) -> FlightState:
         e = self.estimate
         assert e is not None
-        p, v, q, w = e.position_m, e.velocity_m_s, e.quaternion, e.angular_velocity_body_rad_s
         return FlightState(
-            position_m=(float(p[0]), float(p[1]), float(p[2])),
-            velocity_m_s=(float(v[0]), float(v[1]), float(v[2])),
-            quaternion=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
-            angular_velocity_body_rad_s=(float(w[0]), float(w[1]), float(w[2])),
+            tuple(e.position_m.tolist()),
+            tuple(e.velocity_m_s.tolist()),
+            tuple(e.quaternion.tolist()),
+            tuple(e.angular_velocity_body_rad_s.tolist()),
         )
 
     def accel_bias_m_s2(self) -> tuple[float, float, float]:
@@ -171,8 +170,8 @@ class Navigation:
         self._steps += 1
         # the covariance follows at COVARIANCE_PERIOD_S from the IMU's mean over the interval
         self._pending_dt += dt
-        self._pending_f += imu.specific_force * dt
-        self._pending_w += imu.rates * dt
+        self._pending_f += np.array(imu.specific_force) * dt
+        self._pending_w += np.array(imu.rates) * dt
         if self._pending_dt >= COVARIANCE_PERIOD_S:
             self._sync()
         # what the prediction moved and turned, for measurements captured in the past
@@ -189,10 +188,10 @@ class Navigation:
         if (
             self._steps % SLOW_FUSION_EVERY == 0
             and not (p.ev_ctrl & EV_YAW and self._alive("motion capture", t))
-            and imu.field.any()
+            and any(imu.field)
         ):
             self._fuse("heading", ekf.fuse_heading(
-                self.estimate, imu.field, self._field_world(), p.mag_noise_rad, p.gate_sd
+                self.estimate, np.array(imu.field), self._field_world(), p.mag_noise_rad, p.gate_sd
             ))  # fmt: skip
         if (
             p.of_ctrl
@@ -242,7 +241,7 @@ class Navigation:
             attitude_sd = p.ev_att_noise_rad
         else:
             q = ekf.attitude_from_gravity_and_field(
-                imu.specific_force, imu.field, self._field_world()
+                np.array(imu.specific_force), np.array(imu.field), self._field_world()
             )
             attitude_sd = 0.05
         if mocap is not None:
@@ -354,7 +353,7 @@ class Navigation:
         if f["quality"] == 0 or dt <= 0.0 or not height > 0.0:
             return
         self._last_seen["optical flow"] = t
-        rates = imu.rates - self.estimate.gyro_bias_rad_s  # FLU; flow was made in FRD
+        rates = np.array(imu.rates) - self.estimate.gyro_bias_rad_s  # FLU; flow was made in FRD
         # FRD: flow_x = (p - v_y / h) dt, flow_y = (q + v_x / h) dt  (simbridge/hil.py)
         p_frd, q_frd = rates[0], -rates[1]
         vy_frd = (p_frd - f["integrated_x"] / dt) * height

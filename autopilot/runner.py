@@ -206,6 +206,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             t_us = step.sensor["time_usec"]
             t = t_us * 1e-6
             t_nav = time.perf_counter()
+            if not nav.ready:  # aligning: on the tick's pose or fix, which follow its IMU
+                link.arrived(step)
             nav.predict(step)
             nav_s = time.perf_counter() - t_nav
             if not nav.ready:  # aligning: the first pose or fix has not come yet
@@ -215,8 +217,6 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 nav.resting()
             state = nav.state()
             height = nav.height_m()
-            wall = time.monotonic()
-            inp = StepInput(t, wall, state, height, resting_height, nav.position_lost(t))
             if not rows and config.mission:
                 cmd_state = station.load_mission(cmd_state, config.mission)
             if (
@@ -284,10 +284,20 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                     state, cmd.setpoint, ge, vehicle, tuning.controller, integral, term, t - last_t
                 )
                 speeds = output.rotor_speeds_rad_s
-                # anti-windup: not on the ground (but while taking off: a vehicle heavier than
-                # its file must wind the integral up to leave it), in contact or saturated.
-                # While landing it runs: a vehicle held up by a force its model lacks must
-                # wind it down to come down (PX4's integrators run until ground contact)
+                last_setpoint_z = cmd.setpoint.position_m[2]
+                timings.append(time.perf_counter() - t0)
+                step_timings.append(timings[-1] + nav_s)
+            else:
+                speeds, ge, output = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), None
+                integral = (0.0, 0.0, 0.0)  # rotors off: the next flight starts afresh
+            link.send(t_us, tuple(n / n_max for n in speeds), channels, cmd.armed)
+            # off the control path from here: the simulator steps meanwhile
+            if output is not None:
+                # the integral for the next step. Anti-windup: not on the ground (but while
+                # taking off: a vehicle heavier than its file must wind the integral up to
+                # leave it), in contact or saturated. While landing it runs: a vehicle held
+                # up by a force its model lacks must wind it down to come down (PX4's
+                # integrators run until ground contact)
                 frozen = (
                     cmd_state.phase not in RECORDED_PHASES
                     or (
@@ -304,19 +314,15 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                     tuning.controller,
                     frozen,
                 )
-                last_setpoint_z = cmd.setpoint.position_m[2]
-                timings.append(time.perf_counter() - t0)
-                step_timings.append(timings[-1] + nav_s)
-            else:
-                speeds, ge, output = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), None
-                integral = (0.0, 0.0, 0.0)  # rotors off: the next flight starts afresh
             last_t = t
-            link.send(t_us, tuple(n / n_max for n in speeds), channels, cmd.armed)
-            # off the control path from here: the simulator steps meanwhile
+            inp = StepInput(
+                t, time.monotonic(), state, height, resting_height, nav.position_lost(t)
+            )
+            # the rest of the tick (its other sensors, then its truth) for the fusions
+            link.receive_truth(step)
             t_nav = time.perf_counter()
             nav.correct(step)
             correction_timings.append(time.perf_counter() - t_nav)
-            link.receive_truth(step)  # where it follows the tick (our simulator's transport)
             truth = step.latest.get("DEBUG_VECT")
             if cmd.setpoint is not None and airborne and truth is not None:
                 ge_pairs.append((height, target[2], truth["z"]))

@@ -4,29 +4,30 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from autopilot.simlink import Step
-from simbridge.frames import frd_to_flu
+from simbridge.frames import Vec3, frd_to_flu
 
 
 @dataclass(frozen=True)
 class Imu:
+    """Floats: the prediction on the control path takes them as they are (three numpy arrays
+    would cost more than the prediction's arithmetic); the fusions make arrays as needed."""
+
     time_us: int
-    specific_force: np.ndarray  # body FLU, m/s^2
-    rates: np.ndarray  # body FLU, rad/s
-    field: np.ndarray  # body FLU, gauss
+    specific_force: Vec3  # body FLU, m/s^2
+    rates: Vec3  # body FLU, rad/s
+    field: Vec3  # body FLU, gauss
     pressure_hpa: float
 
 
 def imu_from(step: Step) -> Imu:
     s = step.sensor
     return Imu(
-        time_us=s["time_usec"],
-        specific_force=np.array(frd_to_flu((s["xacc"], s["yacc"], s["zacc"]))),
-        rates=np.array(frd_to_flu((s["xgyro"], s["ygyro"], s["zgyro"]))),
-        field=np.array(frd_to_flu((s["xmag"], s["ymag"], s["zmag"]))),
-        pressure_hpa=s["abs_pressure"],
+        s["time_usec"],
+        frd_to_flu((s["xacc"], s["yacc"], s["zacc"])),
+        frd_to_flu((s["xgyro"], s["ygyro"], s["zgyro"])),
+        frd_to_flu((s["xmag"], s["ymag"], s["zmag"])),
+        s["abs_pressure"],
     )
 
 

@@ -92,12 +92,15 @@ class SimLink:
                 new.add(kind)
                 if kind == "HIL_SENSOR":
                     return Step(fields, self._latest, new)
-            self._read()
+            if not self._decode_pending():
+                self._read()
 
     def receive_truth(self, step: Step) -> None:
         """Read on to the truth of `step`'s tick: its HIL_STATE_QUATERNION (the end of the truth
         our simulator sends right after each tick), so that `step` holds that tick's truth.
-        Called after the reply, off the control path. A simulator that sends its truth before
+        Called after the reply, off the control path, before the estimator's fusions: the
+        tick's other sensors come between its HIL_SENSOR and its truth in our simulator's
+        order. A simulator that sends its truth before
         the tick (the PX4 order) has it there already; one that sends none ends the wait with
         its next tick, which is left for `receive_step`."""
         time_us = step.sensor["time_usec"]
@@ -114,7 +117,30 @@ class SimLink:
                 step.new.add(kind)
                 if kind == "HIL_STATE_QUATERNION" and fields["time_usec"] >= time_us:
                     return
-            self._read()
+            if not self._decode_pending():
+                self._read()
+
+    def arrived(self, step: Step) -> None:
+        """What has already arrived of `step`'s tick after its HIL_SENSOR (our simulator sends
+        the tick's other sensors right behind it), without waiting for more: for the
+        estimator's alignment, which needs the tick's pose or fix before the reply. The next
+        tick is left for `receive_step`."""
+        try:
+            data = transport.recv_now(self._sock)
+        except OSError:
+            data = None  # the next receive reports it
+        if data:
+            self._queue_frames(data)
+        while True:
+            while self._queue:
+                kind, fields = self._queue[0]
+                if kind == "HIL_SENSOR":
+                    return
+                self._queue.pop(0)
+                self._latest[kind] = fields
+                step.new.add(kind)
+            if not self._decode_pending():
+                return
 
     def _read(self) -> None:
         """One blocking read into the queue of decoded frames."""
@@ -132,10 +158,21 @@ class SimLink:
             transport.set_recv_timeout(self._sock, self._timeout_s)
         self._queue_frames(data)
 
-    def _queue_frames(self, data: bytes) -> None:
-        frames = self._reader.feed(data)
+    def _queue_frames(self, data: bytes, stop_after: str | None = "HIL_SENSOR") -> None:
+        """Decodes up to the first tick in `data` (on the control path, nothing after it is
+        needed before the reply); the rest waits in the reader for `_decode_pending`."""
+        frames = self._reader.feed(data, stop_after)
         self.received += len(frames)
         self._queue.extend(frames)
+
+    def _decode_pending(self) -> bool:
+        """Decodes what the reader holds back, up to the next tick; whether any frame came
+        of it (if not, what it holds is a frame cut short: more must be read)."""
+        if not self._reader.pending:
+            return False
+        queued = len(self._queue)
+        self._queue_frames(b"")
+        return len(self._queue) > queued
 
     def _wait_s(self) -> float:
         return self._timeout_s if self.received else self._first_timeout_s
@@ -148,9 +185,10 @@ class SimLink:
             while (data := transport.recv_now(self._sock)) is not None:
                 if not data:
                     break  # closed: the next receive reports it
-                self._queue_frames(data)
+                self._queue_frames(data, None)
         except OSError:
             pass  # the next receive reports it
+        self._queue_frames(b"", None)  # and whatever an earlier read held back
         return any(kind == "HIL_SENSOR" for kind, _ in self._queue)
 
     def send(

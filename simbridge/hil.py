@@ -4,7 +4,7 @@ Simulator -> autopilot, per control step: HIL_STATE_QUATERNION and HIL_SENSOR; O
 motion-capture pose, float precision), DISTANCE_SENSOR (downward range, whole cm) with
 HIL_OPTICAL_FLOW (a flow deck: flow and the same range in float metres) and
 ESC_TELEMETRY_1_TO_4 (actual rotor speeds, so motor lag is observable) at their world-file
-rates; HIL_GPS at 10 Hz; HIL_SENSOR always last. Autopilot -> simulator:
+rates; HIL_GPS at 10 Hz; HIL_SENSOR, the tick, first. Autopilot -> simulator:
 HIL_ACTUATOR_CONTROLS. With the true ground effect (DEBUG_VECT GE_TRUE) go the true
 position in floats (LOCAL_POSITION_NED) and the true height above the surface below
 (ALTITUDE's bottom_clearance), all for evaluation only. Units and frames (NED,
@@ -95,7 +95,7 @@ class HilEncoder:
 
     def __init__(self, world: World, vehicle: Vehicle) -> None:
         self.world, self.vehicle = world, vehicle
-        seq = PacketSequence()
+        seq = self._seq = PacketSequence()
 
         def packer(cls: object) -> WirePacker:
             return WirePacker(cls, SIM_SYSTEM_ID, SIM_COMPONENT_ID, seq)
@@ -152,9 +152,10 @@ class HilEncoder:
         return self.tick(state, time_us) + self.truth(time_us, truth)
 
     def tick(self, state: VehicleState, time_us: int) -> bytes:
-        """The sensors of one control step, HIL_SENSOR last: the tick a lockstep autopilot
-        answers. The truth follows in a second send (`truth`), encoded while the autopilot
-        computes its reply, off the lockstep's path."""
+        """The sensors of one control step, HIL_SENSOR first: the tick a lockstep autopilot
+        answers (its control path needs the IMU alone; what follows is there for the fusions
+        after its reply, and it need not decode it first). The truth follows in a second send
+        (`truth`), encoded while the autopilot computes its reply, off the lockstep's path."""
         self._advance(state)
         return self._tick_bytes(time_us)
 
@@ -199,6 +200,7 @@ class HilEncoder:
     def _tick_bytes(self, time_us: int) -> bytes:
         nav = self._nav_state
         parts = []
+        sensor_sequence = self._seq.next()  # HIL_SENSOR's: first on the wire
         until_s = self.world.sensors.odometry_until_s
         if self._due("odometry") and (until_s is None or time_us < until_s * 1e6):
             parts.append(self._odometry(self._mocap_state, time_us))
@@ -210,9 +212,9 @@ class HilEncoder:
             parts.append(self._esc(self._history[-1]))  # the rotors now: no delay line
         if self._due("gps"):
             parts.append(self._gps(nav, time_us))
-        # HIL_SENSOR last: it is the tick a lockstep autopilot answers, so everything of this
-        # step has arrived when it does.
-        parts.append(self._hil_sensor(self._imu_state, time_us))
+        # computed last, as it always was (the sensor errors are drawn in this order: a seed
+        # gives the same flight), sent first
+        parts.insert(0, self._hil_sensor(self._imu_state, time_us, sensor_sequence))
         self._steps += 1
         return b"".join(parts)
 
@@ -221,7 +223,7 @@ class HilEncoder:
     def _amsl_m(self, z_m: float) -> float:
         return self.world.origin.alt_m + z_m
 
-    def _hil_sensor(self, s: VehicleState, time_us: int) -> bytes:
+    def _hil_sensor(self, s: VehicleState, time_us: int, sequence: int) -> bytes:
         m = quat_to_matrix(s.quaternion)
         a = s.acceleration_m_s2
         specific_force = add(
@@ -255,6 +257,7 @@ class HilEncoder:
             15.0 - 0.0065 * alt,
             FIELDS_UPDATED,
             0,
+            sequence=sequence,
         )
 
     def _position(self, s: VehicleState) -> tuple[float, float, float]:

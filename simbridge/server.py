@@ -161,7 +161,7 @@ class SimServer:
     def _send_step(
         self, conn: socket.socket, encoder: HilEncoder, sim: Simulation, *, with_forces: bool
     ) -> None:
-        """One step's messages: the tick (the sensors, HIL_SENSOR last), then in a second send
+        """One step's messages: the tick (the sensors, HIL_SENSOR first), then in a second send
         its truth, encoded while the autopilot computes its reply (an autopilot answers
         HIL_SENSOR and takes the rest as it comes; ours reads the truth after its reply)."""
         self._send(conn, encoder.tick(sim.state(), sim.time_us))

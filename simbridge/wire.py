@@ -64,7 +64,9 @@ class WirePacker:
             None if any(length for _, length in self._order) else [i for i, _ in self._order]
         )
 
-    def pack(self, *values: Any) -> bytes:
+    def pack(self, *values: Any, sequence: int | None = None) -> bytes:
+        """One frame; `sequence`: a number taken from the stream earlier (`PacketSequence.next`)
+        for a frame packed after others it goes before on the wire."""
         order = self._scalar_order
         if order is not None:
             flat: list[Any] = [values[i] for i in order]
@@ -78,9 +80,12 @@ class WirePacker:
         # MAVLink 2 drops trailing zero bytes of the payload, keeping at least one.
         payload = self._struct.pack(*flat).rstrip(b"\0") or b"\0"
         msgid = self._msgid
-        seq = self._seq
-        v = seq.value
-        seq.value = (v + 1) & 0xFF
+        if sequence is None:
+            seq = self._seq
+            v = seq.value
+            seq.value = (v + 1) & 0xFF
+        else:
+            v = sequence
         src = self._src
         body = _HEADER.pack(
             MAVLINK2_STX, len(payload), 0, 0, v, src[0], src[1], msgid & 0xFFFF, msgid >> 16
@@ -199,7 +204,15 @@ class FrameReader:
             i = j + 1
         return None
 
-    def feed(self, data: bytes) -> list[tuple[str, dict[str, Any]]]:
+    @property
+    def pending(self) -> bool:
+        """Whether bytes wait to be decoded (a frame cut short, or frames after a stop)."""
+        return bool(self._pending)
+
+    def feed(self, data: bytes, stop_after: str | None = None) -> list[tuple[str, dict[str, Any]]]:
+        """The frames in what is pending plus `data`. With `stop_after`, decoding stops after
+        the first frame of that name and the rest waits, undecoded, for the next call (an
+        autopilot answering a tick decodes only what precedes it before replying)."""
         out: list[tuple[str, dict[str, Any]]] = []
         buf = self._pending + data if self._pending else data
         self._pending = b""
@@ -225,4 +238,7 @@ class FrameReader:
             else:
                 name, fields, i = frame
                 out.append((name, fields))
+                if name == stop_after:
+                    self._pending = buf[i:]
+                    break
         return out

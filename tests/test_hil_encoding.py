@@ -44,6 +44,20 @@ def every_step(world):
     return dataclasses.replace(with_ideal_sensors(world), sensors=rates)
 
 
+def test_sequence_numbers_count_up_in_the_order_frames_go_on_the_wire():
+    """HIL_SENSOR is computed after the other sensors (the errors are drawn in that order)
+    but goes first: its sequence number is taken first, so a receiver counting sequence
+    gaps (MAVProxy's link statistics) sees none."""
+    world = every_step(load_world())
+    encoder = HilEncoder(world, VEHICLE)
+    seqs = []
+    for k in range(3):
+        data = encoder.encode(state(1.0, 2.0, 1.5), 4000 * (k + 1))
+        seqs += [m.get_seq() for m in mavlink.MAVLink(None).parse_buffer(data) or ()]
+    assert len(seqs) > 10
+    assert seqs == [(seqs[0] + i) % 256 for i in range(len(seqs))]
+
+
 def test_a_level_hovering_state_in_mavlink_units_and_frames():
     world = every_step(load_world())
     msgs = decode(
@@ -54,9 +68,11 @@ def test_a_level_hovering_state_in_mavlink_units_and_frames():
             8000,
         )
     )
-    # the tick (HIL_SENSOR) after every sensor, then its truth (here the state alone: no
-    # effect forces given)
-    assert list(msgs)[-2:] == ["HIL_SENSOR", "HIL_STATE_QUATERNION"]
+    # the tick (HIL_SENSOR) first, the step's other sensors behind it, then its truth (here
+    # the state alone: no effect forces given)
+    order = list(msgs)
+    assert order[0] == "HIL_SENSOR" and order[-1] == "HIL_STATE_QUATERNION"
+    assert {"ODOMETRY", "DISTANCE_SENSOR", "HIL_OPTICAL_FLOW", "HIL_GPS"} <= set(msgs)
     sensor = msgs["HIL_SENSOR"][0]
     assert (sensor.xacc, sensor.yacc, sensor.zacc) == pytest.approx((0.0, 0.0, -9.81))
     assert (sensor.xgyro, sensor.ygyro, sensor.zgyro) == pytest.approx((0.01, -0.02, -0.03))

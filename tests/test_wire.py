@@ -139,6 +139,24 @@ def test_reader_waits_for_the_rest_of_a_split_frame():
     assert [name for name, _ in out] == [cls.msgname for cls, _ in CASES]
 
 
+def test_reader_stops_after_a_tick_and_keeps_the_rest_undecoded():
+    """An autopilot decodes what it needs before its reply (up to the tick) and the rest
+    after: two ticks and their truth in one read come out in order, one tick per call."""
+    mav = mavlink.MAVLink(None, 1, 1)
+    data = b"".join(cls(*values).pack(mav) for cls, values in CASES) * 2
+    names = [cls.msgname for cls, _ in CASES]
+    first_tick = names.index("HIL_SENSOR") + 1
+    reader = FrameReader(mavlink)
+    out = reader.feed(data[:-5], stop_after="HIL_SENSOR")  # the last frame cut short
+    assert [name for name, _ in out] == names[:first_tick] and reader.pending
+    out = reader.feed(b"", stop_after="HIL_SENSOR")
+    assert [name for name, _ in out] == (names[first_tick:] + names)[: len(names)]
+    out = reader.feed(b"", stop_after="HIL_SENSOR")  # nothing whole left before the cut
+    assert [name for name, _ in out] == names[first_tick:-1] and reader.pending
+    assert [name for name, _ in reader.feed(data[-5:])] == names[-1:]
+    assert not reader.pending and reader.malformed == reader.unknown == 0
+
+
 def test_reader_resynchronises_after_noise_bad_crcs_and_broken_headers():
     mav = mavlink.MAVLink(None, 1, 1)
     values = dict(CASES)[mavlink.MAVLink_hil_sensor_message]
