@@ -207,7 +207,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             t = t_us * 1e-6
             t_nav = time.perf_counter()
             if not nav.ready:  # aligning: on the tick's pose or fix, which follow its IMU
-                link.arrived(step)
+                link.rest_of_tick(step)
             nav.predict(step)
             nav_s = time.perf_counter() - t_nav
             if not nav.ready:  # aligning: the first pose or fix has not come yet

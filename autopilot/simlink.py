@@ -69,6 +69,7 @@ class SimLink:
         )
         self._controls = [0.0] * 16
         self.received = 0  # messages decoded
+        self._replied = False  # a HIL_ACTUATOR_CONTROLS sent: from now on, lockstep
 
     @property
     def malformed(self) -> int:
@@ -98,11 +99,10 @@ class SimLink:
     def receive_truth(self, step: Step) -> None:
         """Read on to the truth of `step`'s tick: its HIL_STATE_QUATERNION (the end of the truth
         our simulator sends right after each tick), so that `step` holds that tick's truth.
-        Called after the reply, off the control path, before the estimator's fusions: the
-        tick's other sensors come between its HIL_SENSOR and its truth in our simulator's
-        order. A simulator that sends its truth before
-        the tick (the PX4 order) has it there already; one that sends none ends the wait with
-        its next tick, which is left for `receive_step`."""
+        Called after the reply, off the control path, before the estimator's fusions: our
+        simulator sends the tick's other sensors with its truth. A simulator that sends its
+        truth before the tick (the PX4 order) has it there already; one that sends none ends
+        the wait with its next tick, which is left for `receive_step`."""
         time_us = step.sensor["time_usec"]
         truth = self._latest.get("HIL_STATE_QUATERNION")
         if truth is not None and truth["time_usec"] >= time_us:
@@ -120,11 +120,20 @@ class SimLink:
             if not self._decode_pending():
                 self._read()
 
-    def arrived(self, step: Step) -> None:
-        """What has already arrived of `step`'s tick after its HIL_SENSOR (our simulator sends
-        the tick's other sensors right behind it), without waiting for more: for the
-        estimator's alignment, which needs the tick's pose or fix before the reply. The next
-        tick is left for `receive_step`."""
+    def rest_of_tick(self, step: Step) -> None:
+        """`step`'s other sensors before the reply: for the estimator's alignment, which needs
+        the tick's pose or fix. Read on to its truth where that cannot stall the lockstep:
+        before the first reply (a simulator streams its ticks until then) or from a simulator
+        that sends truth (ours sends the tick's other sensors with it); else what has
+        arrived, without waiting."""
+        if "HIL_STATE_QUATERNION" in self._latest or not self._replied:
+            self.receive_truth(step)
+        else:
+            self._arrived(step)
+
+    def _arrived(self, step: Step) -> None:
+        """What has already arrived of `step`'s tick after its HIL_SENSOR, without waiting for
+        more. The next tick is left for `receive_step`."""
         try:
             data = transport.recv_now(self._sock)
         except OSError:
@@ -202,6 +211,7 @@ class SimLink:
         for value, ch in zip(controls, channels, strict=True):
             c[ch] = value
         mode = ARMED_MODE if armed else 0
+        self._replied = True
         try:
             self._sock.sendall(self._pack.pack(time_us, c, mode, LOCKSTEP_FLAG))
         except OSError:

@@ -4,8 +4,8 @@ Simulator -> autopilot, per control step: HIL_STATE_QUATERNION and HIL_SENSOR; O
 motion-capture pose, float precision), DISTANCE_SENSOR (downward range, whole cm) with
 HIL_OPTICAL_FLOW (a flow deck: flow and the same range in float metres) and
 ESC_TELEMETRY_1_TO_4 (actual rotor speeds, so motor lag is observable) at their world-file
-rates; HIL_GPS at 10 Hz; HIL_SENSOR, the tick, first. Autopilot -> simulator:
-HIL_ACTUATOR_CONTROLS. With the true ground effect (DEBUG_VECT GE_TRUE) go the true
+rates; HIL_GPS at 10 Hz; HIL_SENSOR, the tick, first and alone in its send. Autopilot ->
+simulator: HIL_ACTUATOR_CONTROLS. With the true ground effect (DEBUG_VECT GE_TRUE) go the true
 position in floats (LOCAL_POSITION_NED) and the true height above the surface below
 (ALTITUDE's bottom_clearance), all for evaluation only. Units and frames (NED,
 FRD, degE7, mm, cm/s, mG, gauss, hPa) exist only here and in `frames`.
@@ -42,6 +42,7 @@ SIM_SYSTEM_ID = 1
 SIM_COMPONENT_ID = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 # HIL_SENSOR.fields_updated: accelerometer, gyro, magnetometer, barometer (MAVLINK.md).
 FIELDS_UPDATED = 0x7 | 0x38 | 0x1C0 | 0x1A00
+Frame = tuple[WirePacker, tuple]  # a message's packer and its fields, packed later
 LOCKSTEP_FLAG = 1  # HIL_ACTUATOR_CONTROLS.flags bit 0
 ARMED_MODE = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 UNKNOWN_COVARIANCE = [math.nan] + [0.0] * 20
@@ -95,7 +96,7 @@ class HilEncoder:
 
     def __init__(self, world: World, vehicle: Vehicle) -> None:
         self.world, self.vehicle = world, vehicle
-        seq = self._seq = PacketSequence()
+        seq = PacketSequence()
 
         def packer(cls: object) -> WirePacker:
             return WirePacker(cls, SIM_SYSTEM_ID, SIM_COMPONENT_ID, seq)
@@ -141,6 +142,7 @@ class HilEncoder:
         }
         self._steps = 0
         self._period_us = world.control_period_us
+        self._rest: list[Frame] = []  # the tick's messages after HIL_SENSOR, packed later
 
     def _due(self, name: str) -> bool:
         k = self._every[name]
@@ -152,15 +154,16 @@ class HilEncoder:
         return self.tick(state, time_us) + self.truth(time_us, truth)
 
     def tick(self, state: VehicleState, time_us: int) -> bytes:
-        """The sensors of one control step, HIL_SENSOR first: the tick a lockstep autopilot
-        answers (its control path needs the IMU alone; what follows is there for the fusions
-        after its reply, and it need not decode it first). The truth follows in a second send
-        (`truth`), encoded while the autopilot computes its reply, off the lockstep's path."""
+        """HIL_SENSOR of one control step: the tick a lockstep autopilot answers (its control
+        path needs the IMU alone). The step's other sensors (drawn before it, as always) go
+        with the truth in a second send (`truth`), packed while the autopilot computes its
+        reply, off the lockstep's path; it reads them after its reply, for its fusions."""
         self._advance(state)
         return self._tick_bytes(time_us)
 
     def truth(self, time_us: int, forces: EffectForces | None = None) -> bytes:
-        """The truth of the step `tick` encoded, HIL_STATE_QUATERNION last (the end of it).
+        """The rest of the step `tick` encoded: its other sensors, then its truth,
+        HIL_STATE_QUATERNION last (the end of it).
 
         `forces`, the simulator's true effect forces, travel as DEBUG_VECT "GE_TRUE" (the
         world-frame ground-effect force, N): for evaluation and recordings, never control.
@@ -177,7 +180,8 @@ class HilEncoder:
 
     def _truth_bytes(self, time_us: int, truth: EffectForces | None) -> bytes:
         nav = self._nav_state
-        parts = []
+        parts = [packer.pack(*fields) for packer, fields in self._rest]  # the tick's others
+        self._rest.clear()
         if truth is not None and self._truth_due:
             ge = truth.ground_effect_n
             parts.append(self._pack_debug.pack(TRUTH_NAME, time_us, ge[0], ge[1], ge[2]))
@@ -199,31 +203,29 @@ class HilEncoder:
 
     def _tick_bytes(self, time_us: int) -> bytes:
         nav = self._nav_state
-        parts = []
-        sensor_sequence = self._seq.next()  # HIL_SENSOR's: first on the wire
+        rest = self._rest
         until_s = self.world.sensors.odometry_until_s
         if self._due("odometry") and (until_s is None or time_us < until_s * 1e6):
-            parts.append(self._odometry(self._mocap_state, time_us))
+            rest.append(self._odometry(self._mocap_state, time_us))
         if self._due("distance"):
             range_m = self._errors.range_m(nav.range_m)
-            parts.append(self._distance(range_m, time_us))
-            parts.append(self._flow(nav, range_m, time_us))
+            rest.append(self._distance(range_m, time_us))
+            rest.append(self._flow(nav, range_m, time_us))
         if self._due("esc"):
-            parts.append(self._esc(self._history[-1]))  # the rotors now: no delay line
+            rest.append(self._esc(self._history[-1]))  # the rotors now: no delay line
         if self._due("gps"):
-            parts.append(self._gps(nav, time_us))
+            rest.append(self._gps(nav, time_us))
         # computed last, as it always was (the sensor errors are drawn in this order: a seed
-        # gives the same flight), sent first
-        parts.insert(0, self._hil_sensor(self._imu_state, time_us, sensor_sequence))
+        # gives the same flight), packed and sent first; the others are packed with the truth
         self._steps += 1
-        return b"".join(parts)
+        return self._hil_sensor(self._imu_state, time_us)
 
     # -- one message each ---------------------------------------------------------------
 
     def _amsl_m(self, z_m: float) -> float:
         return self.world.origin.alt_m + z_m
 
-    def _hil_sensor(self, s: VehicleState, time_us: int, sequence: int) -> bytes:
+    def _hil_sensor(self, s: VehicleState, time_us: int) -> bytes:
         m = quat_to_matrix(s.quaternion)
         a = s.acceleration_m_s2
         specific_force = add(
@@ -257,7 +259,6 @@ class HilEncoder:
             15.0 - 0.0065 * alt,
             FIELDS_UPDATED,
             0,
-            sequence=sequence,
         )
 
     def _position(self, s: VehicleState) -> tuple[float, float, float]:
@@ -299,7 +300,7 @@ class HilEncoder:
             _int16(acc[2] * to_mg),
         )
 
-    def _odometry(self, s: VehicleState, time_us: int) -> bytes:
+    def _odometry(self, s: VehicleState, time_us: int) -> Frame:
         """A motion-capture pose, stamped with its capture time (it arrives `mocap_latency_s`
         late). Velocities are NaN (not measured) unless the sensors are ideal."""
         errors = self._errors
@@ -311,7 +312,7 @@ class HilEncoder:
         else:
             v_body = rates = (math.nan, math.nan, math.nan)
         captured_us = time_us - (self._mocap_delay - self._state_delay) * self._period_us
-        return self._pack_odometry.pack(
+        return self._pack_odometry, (
             max(0, captured_us),
             mavlink.MAV_FRAME_LOCAL_NED,
             mavlink.MAV_FRAME_BODY_FRD,
@@ -332,11 +333,11 @@ class HilEncoder:
             100,
         )
 
-    def _distance(self, range_m: float, time_us: int) -> bytes:
+    def _distance(self, range_m: float, time_us: int) -> Frame:
         max_cm = round(self.vehicle.range_sensor_max_m * 100.0)
         # MAVLink: max_distance + 1 means nothing in range.
         current = max_cm + 1 if range_m == math.inf else min(max_cm, round(range_m * 100.0))
-        return self._pack_distance.pack(
+        return self._pack_distance, (
             time_us // 1000,
             1,
             max_cm,
@@ -351,7 +352,7 @@ class HilEncoder:
             0,
         )
 
-    def _flow(self, s: VehicleState, range_m: float, time_us: int) -> bytes:
+    def _flow(self, s: VehicleState, range_m: float, time_us: int) -> Frame:
         """A downward flow-and-range deck (Crazyflie flow deck): the range in float metres.
 
         Flow is integrated over the message interval from the current rates and velocity
@@ -366,7 +367,7 @@ class HilEncoder:
         flow_x = self._errors.scalar((rates[0] - v[1] / h) * dt, flow_sd) if known else 0.0
         flow_y = self._errors.scalar((rates[1] + v[0] / h) * dt, flow_sd) if known else 0.0
         h = range_m
-        return self._pack_flow.pack(
+        return self._pack_flow, (
             time_us,
             0,
             round(dt * 1e6),
@@ -381,12 +382,12 @@ class HilEncoder:
             h if known else -1.0,
         )
 
-    def _esc(self, s: VehicleState) -> bytes:
+    def _esc(self, s: VehicleState) -> Frame:
         rpm = [min(65535, round(n * RAD_S_TO_RPM)) for n in s.rotor_speeds_rad_s]
         count = self._steps & 0xFFFF
-        return self._pack_esc.pack([0] * 4, [0] * 4, [0] * 4, [0] * 4, rpm, [count] * 4)
+        return self._pack_esc, ([0] * 4, [0] * 4, [0] * 4, [0] * 4, rpm, [count] * 4)
 
-    def _gps(self, s: VehicleState, time_us: int) -> bytes:
+    def _gps(self, s: VehicleState, time_us: int) -> Frame:
         n, errors = self._errors.noise, self._errors
         x, y, z = self._position(s)
         lat, lon, alt = self._geodetic((
@@ -401,7 +402,7 @@ class HilEncoder:
             if ground > 0.05
             else 65535
         )
-        return self._pack_gps.pack(
+        return self._pack_gps, (
             time_us,
             3,
             lat,

@@ -161,9 +161,9 @@ class SimServer:
     def _send_step(
         self, conn: socket.socket, encoder: HilEncoder, sim: Simulation, *, with_forces: bool
     ) -> None:
-        """One step's messages: the tick (the sensors, HIL_SENSOR first), then in a second send
-        its truth, encoded while the autopilot computes its reply (an autopilot answers
-        HIL_SENSOR and takes the rest as it comes; ours reads the truth after its reply)."""
+        """One step's messages: the tick (HIL_SENSOR), then in a second send the step's other
+        sensors and its truth, encoded while the autopilot computes its reply (an autopilot
+        answers HIL_SENSOR and takes the rest as it comes; ours reads it after its reply)."""
         self._send(conn, encoder.tick(sim.state(), sim.time_us))
         forces = sim.effect_forces() if with_forces else None
         self._send(conn, encoder.truth(sim.time_us, forces))

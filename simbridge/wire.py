@@ -64,9 +64,7 @@ class WirePacker:
             None if any(length for _, length in self._order) else [i for i, _ in self._order]
         )
 
-    def pack(self, *values: Any, sequence: int | None = None) -> bytes:
-        """One frame; `sequence`: a number taken from the stream earlier (`PacketSequence.next`)
-        for a frame packed after others it goes before on the wire."""
+    def pack(self, *values: Any) -> bytes:
         order = self._scalar_order
         if order is not None:
             flat: list[Any] = [values[i] for i in order]
@@ -80,12 +78,9 @@ class WirePacker:
         # MAVLink 2 drops trailing zero bytes of the payload, keeping at least one.
         payload = self._struct.pack(*flat).rstrip(b"\0") or b"\0"
         msgid = self._msgid
-        if sequence is None:
-            seq = self._seq
-            v = seq.value
-            seq.value = (v + 1) & 0xFF
-        else:
-            v = sequence
+        seq = self._seq
+        v = seq.value
+        seq.value = (v + 1) & 0xFF
         src = self._src
         body = _HEADER.pack(
             MAVLINK2_STX, len(payload), 0, 0, v, src[0], src[1], msgid & 0xFFFF, msgid >> 16
