@@ -107,18 +107,24 @@ class SimLink:
         truth = self._latest.get("HIL_STATE_QUATERNION")
         if truth is not None and truth["time_usec"] >= time_us:
             return
-        while True:
-            while self._queue:
-                kind, fields = self._queue[0]
-                if kind == "HIL_SENSOR":
-                    return  # the next tick: no truth came for this one
-                self._queue.pop(0)
-                self._latest[kind] = fields
-                step.new.add(kind)
-                if kind == "HIL_STATE_QUATERNION" and fields["time_usec"] >= time_us:
-                    return
+        while not self._take(step):
             if not self._decode_pending():
                 self._read()
+
+    def _take(self, step: Step) -> bool:
+        """Moves the queued frames of `step`'s tick into it; True once its truth is taken or
+        the next tick is at the head of the queue (no truth came for this one)."""
+        time_us = step.sensor["time_usec"]
+        while self._queue:
+            kind, fields = self._queue[0]
+            if kind == "HIL_SENSOR":
+                return True
+            self._queue.pop(0)
+            self._latest[kind] = fields
+            step.new.add(kind)
+            if kind == "HIL_STATE_QUATERNION" and fields["time_usec"] >= time_us:
+                return True
+        return False
 
     def rest_of_tick(self, step: Step) -> None:
         """`step`'s other sensors before the reply: for the estimator's alignment, which needs
@@ -132,24 +138,16 @@ class SimLink:
             self._arrived(step)
 
     def _arrived(self, step: Step) -> None:
-        """What has already arrived of `step`'s tick after its HIL_SENSOR, without waiting for
-        more. The next tick is left for `receive_step`."""
+        """What has already arrived of `step`'s tick after its HIL_SENSOR (up to its truth),
+        without waiting for more. The next tick is left for `receive_step`."""
         try:
             data = transport.recv_now(self._sock)
         except OSError:
             data = None  # the next receive reports it
         if data:
             self._queue_frames(data)
-        while True:
-            while self._queue:
-                kind, fields = self._queue[0]
-                if kind == "HIL_SENSOR":
-                    return
-                self._queue.pop(0)
-                self._latest[kind] = fields
-                step.new.add(kind)
-            if not self._decode_pending():
-                return
+        while not self._take(step) and self._decode_pending():
+            pass
 
     def _read(self) -> None:
         """One blocking read into the queue of decoded frames."""
