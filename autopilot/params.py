@@ -23,6 +23,7 @@ from autopilot.commander import CommanderParams
 from autopilot.controller import ControllerParams
 from autopilot.estimator_params import EstimatorParams
 from autopilot.firmware_defaults import identity_defaults
+from autopilot.ground_models import MODEL_NAMES
 from autopilot.land_detector import LandDetectorParams
 from autopilot.mission_items import Geofence
 from simbridge.config import ConfigError, param
@@ -30,7 +31,6 @@ from simbridge.config import ConfigError, param
 # failsafe actions, PX4's numbering for NAV_DLL_ACT and GF_ACTION
 ACTION_NONE, ACTION_WARN, ACTION_HOLD, ACTION_RETURN, ACTION_LAND = 0, 1, 2, 3, 5
 ACTION_NAMES = {0: "none", 1: "warn", 2: "hold", 3: "return", 5: "land"}
-MODEL_NAMES = ("none", "analytic", "neural")
 
 
 @dataclass(frozen=True)

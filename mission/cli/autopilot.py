@@ -10,7 +10,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from autopilot.params import MODEL_NAMES
 from mission.cli.online import add_online_options
 from mission.cli.options import DEFAULT_GCS_URLS, gcs_options, max_flight_s, model_options
 from mission.recordings import add_record_options
@@ -78,6 +77,8 @@ def _param_overrides(args: argparse.Namespace) -> dict[str, float]:
             raise ConfigError(f"--param {text!r}: expected NAME=NUMBER")
     model = getattr(args, "model", None)
     if model is not None:
+        from autopilot.ground_models import MODEL_NAMES
+
         out["GFX_GE_MODEL"] = float(MODEL_NAMES.index(model))
     if getattr(args, "rho", None) is not None:
         out["GFX_GE_RHO"] = args.rho

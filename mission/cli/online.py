@@ -7,7 +7,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from autopilot.params import ONLINE_METHODS
 from learner.online.names import METHODS
 from simbridge.config import ConfigError
 
@@ -52,6 +51,8 @@ def online_overrides(args: argparse.Namespace) -> dict[str, float]:
         return {}
     if getattr(args, "model", None) not in (None, "neural"):
         raise ConfigError(f"--online {method}: needs --model neural, not --model {args.model}")
+    from autopilot.params import ONLINE_METHODS  # the parser needs none of the autopilot
+
     return {"GFX_OL_METHOD": float(ONLINE_METHODS.index(method))}
 
 

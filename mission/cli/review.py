@@ -14,7 +14,6 @@ import shutil
 import sys
 from pathlib import Path
 
-from learner.flightlogs.recording import RecordingError, read_recording
 from simbridge.config import ConfigError
 
 
@@ -40,6 +39,8 @@ def rerun_binary() -> str:
 
 def check_recording(path: Path) -> str:
     """Refuse what is not a readable recording; a one-line description of what is."""
+    from learner.flightlogs.recording import RecordingError, read_recording  # pyarrow: lazily
+
     try:
         recording = read_recording(path)
     except RecordingError as err:
