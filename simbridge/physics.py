@@ -37,6 +37,7 @@ from simbridge.vehicle import Vehicle
 from simbridge.world import World
 
 NO_HIT = math.inf
+NO_WALLS = (NO_HIT,) * 4
 LEARNED_RAY_M = 3.0  # a learnt residual's height rays: beyond, its feature is capped anyway
 
 
@@ -62,12 +63,14 @@ class Simulation:
         )
         self.true_mass_kg = vehicle.mass_kg * (fx.mass_error.scale if fx.mass_error else 1.0)
         self._rotors_body = vehicle.rotor_positions_body_m()
+        self._rotors_flat = tuple(c for r in self._rotors_body for c in r)  # x0, y0, z0, x1, ...
         self._span = max(math.dist(r, (0.0, 0.0, 0.0)) for r in self._rotors_body)
         self._arm, self._kz = vehicle.arm_m, vehicle.yaw_moment_coefficient_m
         self._radius = vehicle.rotor_radius_m
         self._ge = fx.ground_effect
         self._ge_cutoff = self._ge.cutoff_for(self._radius) if self._ge else 0.0
         self._ce = fx.ceiling_effect
+        self._wall_effect = fx.wall_effect
         self._ce_cutoff = self._ce.cutoff_for(self._radius) if self._ce else 0.0
         self._lag_tau = fx.motor_lag.time_constant_s if fx.motor_lag else None
         # the thrust's direction in the body frame (body z unless it leans)
@@ -283,7 +286,7 @@ class Simulation:
         below: float,
     ) -> None:
         """The wall effect, the outwash, drag and a learnt residual, where the world has them."""
-        wall = self.world.effects.wall_effect
+        wall = self._wall_effect
         if wall is not None:
             wf = wall_force_n(wall, thrust, self._radius, walls)
             force[0] += wf[0]
@@ -381,7 +384,13 @@ class Simulation:
         if rays is not None and self._hub_rays_only:  # the usual case: rotor heights alone
             _, _, _, _, _, _, m6, m7, m8 = m
             pz = pos[2]
-            zs = [pz + m6 * rx + m7 * ry + m8 * rz for rx, ry, rz in self._rotors_body]
+            x0, y0, z0, x1, y1, z1, x2, y2, z2, x3, y3, z3 = self._rotors_flat
+            zs = (  # the hubs' heights, written out (1 kHz)
+                pz + m6 * x0 + m7 * y0 + m8 * z0,
+                pz + m6 * x1 + m7 * y1 + m8 * z1,
+                pz + m6 * x2 + m7 * y2 + m8 * z2,
+                pz + m6 * x3 + m7 * y3 + m8 * z3,
+            )
             known = rays.distances_about(pos, zs)
             heights = (
                 known if known is not None else rays.distances(self._hubs(pos, m), pos, self._span)
@@ -404,8 +413,8 @@ class Simulation:
                 ceilings, i = d[i : i + 4], i + 4
             if self._outwash is not None:
                 below = d[i]
-        walls: tuple[float, ...] = (NO_HIT,) * 4
-        wall = self.world.effects.wall_effect
+        walls: tuple[float, ...] = NO_WALLS
+        wall = self._wall_effect
         if wall is not None:
             px, py, pz = pos
             ends = [
