@@ -419,11 +419,13 @@ def fuse_pose(
     p = est.covariance
     w, x, y, z = est.quaternion.tolist()
     hy = np.array((2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))  # R[2]
+    # position axes from x on (x, y or x, y, z: a slice, a view) or any (fancy indexing)
+    rows = slice(0, k) if axes == list(range(k)) else axes
     ph = np.empty((N_ERRORS, k + 1))
-    ph[:, :k] = p[:, axes]
+    ph[:, :k] = p[:, rows]
     ph[:, k] = p[:, TH_] @ hy
     s = np.empty((k + 1, k + 1))
-    s[:k, :] = ph[axes, :]
+    s[:k, :] = ph[rows, :]
     s[k, :] = hy @ ph[TH_, :]
     position_var = position_sd_m * position_sd_m
     s.flat[:: k + 2] += [position_var] * k + [yaw_sd_rad * yaw_sd_rad]
