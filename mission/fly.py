@@ -162,6 +162,8 @@ def _fly_with(
     station.vehicle_alive = lambda: process.poll() is None
     try:
         station.connect(timeout_s=20.0)
+        # it shows the mission's progress (heartbeat, items reached, texts), not the state
+        station.stop_streams("ATTITUDE", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED")
         if doc.waypoint_timeout_s is not None:
             station.set_param("GFX_WP_TIMEOUT", doc.waypoint_timeout_s)
         say(f"uploading {len(doc.items)} mission items")

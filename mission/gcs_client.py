@@ -142,6 +142,14 @@ class GroundStation:
                 confirmation += 1
         raise GroundStationError(f"command {command} not acknowledged within {timeout_s:g} s")
 
+    def stop_streams(self, *names: str) -> None:
+        """Asks the vehicle not to stream these messages (MAV_CMD_SET_MESSAGE_INTERVAL -1, as
+        a ground station asks for what it shows): each would cost both ends a decode and a
+        wake-up many times a wall second in a flight faster than real time."""
+        for name in names:
+            msg_id = getattr(mav, f"MAVLINK_MSG_ID_{name}")
+            self.require(mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, -1, what=f"stopping {name}")
+
     def require(self, command: int, *params: float, what: str) -> None:
         result = self.command(command, *params)
         if result != mav.MAV_RESULT_ACCEPTED:
