@@ -8,11 +8,9 @@ BIN    := $(VENV)/bin
 $(BIN)/groundfx: pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-# --no-compile: byte-compiling every installed module (torch's thousands) took 33 of the
-# install's 54 s; Python compiles what it imports, once, on first use
-	$(BIN)/pip install --quiet --no-compile -c constraints.txt -e '.[dev,ray,parquet]'
+	$(BIN)/pip install --quiet -c constraints.txt -e '.[dev,ray,parquet]'
 # MAVProxy for tests/test_mavproxy.py, without its GUI deps (wxPython, OpenCV, VTK)
-	$(BIN)/pip install --quiet --no-compile --no-deps MAVProxy==1.8.75
+	$(BIN)/pip install --quiet --no-deps MAVProxy==1.8.75
 	touch $@
 
 install: $(BIN)/groundfx
