@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: install demo test lint bench clean
+.PHONY: install compile demo test lint bench clean
 
 $(BIN)/groundfx: pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -15,15 +15,21 @@ $(BIN)/groundfx: pyproject.toml constraints.txt
 
 install: $(BIN)/groundfx
 
-demo: install
+# These machines set PYTHONDONTWRITEBYTECODE: without this every process (each flight's two)
+# compiled our modules from source at every start (0.4 s of a flight's start-up). Only what
+# changed is compiled again.
+compile: install
+	$(BIN)/python -m compileall -q autopilot simbridge learner mission > /dev/null
+
+demo: compile
 	$(BIN)/groundfx demo
 
-test: install
+test: compile
 	$(BIN)/ruff check .
 # two workers, a test file each: a flight's two processes take turns on one core
 	$(BIN)/pytest -q -n 2 --dist loadfile
 
-bench: install
+bench: compile
 	$(BIN)/groundfx bench sim --json
 
 clean:
