@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simbridge.frames import Quat, Vec3, quat_multiply
+from simbridge.frames import Quat, Vec3, quat_multiply, quat_normalize
 from simbridge.vehicle import GRAVITY_M_S2
 
 GRAVITY_WORLD = np.array([0.0, 0.0, -GRAVITY_M_S2])
@@ -295,15 +295,14 @@ def predict(
 
 
 def _updated(est: Estimate, dx: np.ndarray, p_new: np.ndarray) -> Estimate:
-    qw, qx, qy, qz = quat_multiply(
-        tuple(est.quaternion.tolist()), rotation_vector_floats(dx[6], dx[7], dx[8])
+    q = quat_normalize(
+        quat_multiply(tuple(est.quaternion.tolist()), rotation_vector_floats(dx[6], dx[7], dx[8]))
     )
-    n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
     return Estimate(
         time_us=est.time_us,
         position_m=est.position_m + dx[P_],
         velocity_m_s=est.velocity_m_s + dx[V_],
-        quaternion=np.array((qw * n, qx * n, qy * n, qz * n)),
+        quaternion=np.array(q),
         accel_bias_m_s2=est.accel_bias_m_s2 + dx[BA_],
         gyro_bias_rad_s=est.gyro_bias_rad_s + dx[BG_],
         covariance=0.5 * (p_new + p_new.T),

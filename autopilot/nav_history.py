@@ -5,13 +5,12 @@ fuses delayed measurements against its buffered states the same way)."""
 
 from __future__ import annotations
 
-import math
 from collections import deque
 
 import numpy as np
 
 from autopilot import estimator as ekf
-from simbridge.frames import Quat, Vec3, quat_conjugate, quat_multiply
+from simbridge.frames import Quat, Vec3, quat_conjugate, quat_multiply, quat_normalize
 
 
 class PredictionHistory:
@@ -37,9 +36,7 @@ class PredictionHistory:
         self._moved = (mx + (px - bx), my + (py - by), mz + (pz - bz))
         wx, wy, wz = predicted.angular_velocity_body_rad_s.tolist()
         turn = ekf.rotation_vector_floats(wx * dt, wy * dt, wz * dt)
-        qw, qx, qy, qz = quat_multiply(self._turned, turn)
-        n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        self._turned = (qw * n, qx * n, qy * n, qz * n)
+        self._turned = quat_normalize(quat_multiply(self._turned, turn))
         self.record(time_us)
 
     def at_capture(self, estimate: ekf.Estimate, capture_us: int) -> tuple[np.ndarray, np.ndarray]:

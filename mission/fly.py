@@ -157,8 +157,8 @@ def fly(
 def _fly_with(
     station: GroundStation, doc: Any, process: subprocess.Popen, say: Callable[[str], None]
 ) -> dict[str, Any]:
-    """The ground station's part: connect, set the waypoint timeout, upload, arm, start,
-    follow to the disarm."""
+    """The ground station's part: connect, stop the streams it does not show, set the
+    waypoint timeout, upload, arm, start, follow to the disarm."""
     station.vehicle_alive = lambda: process.poll() is None
     try:
         station.connect(timeout_s=20.0)

@@ -53,8 +53,9 @@ def quat_conjugate(q: Quat) -> Quat:
 
 
 def quat_normalize(q: Quat) -> Quat:
-    n = math.sqrt(sum(c * c for c in q))
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+    w, x, y, z = q
+    n = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+    return (w * n, x * n, y * n, z * n)
 
 
 def quat_to_matrix(q: Quat) -> Mat3:
