@@ -86,12 +86,13 @@ def synthetic_log(
     seed: int,
     seconds: float = 30.0,
     meta: dict | None = None,
+    low_m: float = 0.12,
 ) -> FlightLog:
     """A flight along `trajectory` whose logged acceleration is what the diagnosis's force
     model gives for a world with the effects `true` (the nominal world's included), with
     a motion-capture pose's and an IMU's noise."""
     rng = np.random.default_rng(seed + 1000)
-    tr = trajectory(seconds, seed)
+    tr = trajectory(seconds, seed, low_m)
     f = tr["a"] + np.array([0.0, 0.0, GRAVITY_M_S2])  # specific force the thrust must give
     zb = f / np.linalg.norm(f, axis=1, keepdims=True)
     xb = np.array([1.0, 0.0, 0.0]) - zb[:, :1] * zb

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from learner.flightlogs.flightlog import FlightLog
+from learner.flightlogs.resting import resting_rows
 from simbridge.frames import quat_to_matrices
 from simbridge.vehicle import Vehicle
 
@@ -58,6 +59,8 @@ def summarize(log: FlightLog, vehicle: Vehicle) -> dict:
             f"{vehicle.mass_kg * np.max(np.abs(bias)) * 1000:.0f} mN; without the "
             f"accelerometer columns it differentiates the velocity instead"
         )
+    rest = resting_rows(log, vehicle)
+    resting_z = float(np.median(log.position_m[rest, 2])) if rest.any() else None
     return {
         "rows": len(log),
         "duration_s": float(t[-1] - t[0]) if len(log) else 0.0,
@@ -68,6 +71,8 @@ def summarize(log: FlightLog, vehicle: Vehicle) -> dict:
         "velocity_change_m_s2": [float(a) for a in dv],
         "conversions": list(log.meta.get("conversions", [])),
         "warnings": warnings,
+        "resting_rows": int(rest.sum()),
+        "resting_z_m": resting_z,
     }
 
 
@@ -83,4 +88,11 @@ def summary_lines(s: dict, vehicle: Vehicle) -> list[str]:
         f"acceleration ({s['accel_source']}): mean [{ax:.3f}, {ay:.3f}, {az:.3f}] m/s^2 "
         f"(velocity change over the flight: [{dx:.3f}, {dy:.3f}, {dz:.3f}] m/s^2)",
     ]
+    if s.get("resting_z_m") is not None:
+        half = vehicle.body_size_m[2] / 2.0
+        lines.append(
+            f"rests on a surface in {s['resting_rows']} rows at z {s['resting_z_m']:.4f} m: a "
+            f"flat floor at z = 0 would put it {(s['resting_z_m'] - half) * 1000:+.1f} mm off the "
+            f"simulator's resting height ({half * 1000:.1f} mm; `gap diagnose` shifts by it)"
+        )
     return lines + [f"warning: {w}" for w in s["warnings"]]

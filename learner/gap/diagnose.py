@@ -13,6 +13,7 @@ from learner.flightlogs.flightlog import FlightLog
 from learner.gap import fit as gapfit
 from learner.gap.candidates import CANDIDATES, Values, nominal_values
 from learner.gap.flightdata import FlightData, describe_left_out, prepare
+from learner.gap.ground_level import level_logs
 from learner.gap.plausibility import check as check_plausible
 from learner.gap.regimes import REGIMES, RegimeBin, regime_table, regime_variables, rules
 from learner.gap.residual import (
@@ -56,6 +57,7 @@ class Diagnosis:
     summaries: dict[str, Any] = field(default_factory=dict)  # whole-flight: force, trend, rotors
     unexplained: dict[str, Any] = field(default_factory=dict)  # what the catalogue leaves
     learned_model: ResidualModel | None = None  # that, learnt (a `learned_residual` effect)
+    z_offsets_m: dict[str, float] = field(default_factory=dict)  # log -> z shifted by (m)
 
 
 def _problem(flights: list[FlightData], nominal: Values, vehicle: Vehicle) -> gapfit.Problem:
@@ -104,9 +106,14 @@ def diagnose(
     world: World,
     vehicle: Vehicle,
     folds: int = 3,
+    z_offset_m: float | None = None,
 ) -> Diagnosis:
-    """The whole analysis; with no held-out logs the gap is measured by cross-validation."""
+    """The whole analysis; with no held-out logs the gap is measured by cross-validation.
+    The logs' z is first put on the world's ground (`ground_level.level_logs`: from where
+    the vehicle rests, or `z_offset_m`)."""
     nominal = nominal_values(world.effects, vehicle)
+    leveled, level_notes, z_offsets = level_logs(fitting + held_out, world, vehicle, z_offset_m)
+    fitting, held_out = leveled[: len(fitting)], leveled[len(fitting) :]
     fit_data = [prepare(log, world, vehicle) for log in fitting]
     hold_data = [prepare(log, world, vehicle) for log in held_out]
     problem = _problem(fit_data, nominal, vehicle)
@@ -170,12 +177,13 @@ def diagnose(
         gap=gap,
         vehicle=vehicle,
         left_out=left_out_counts(all_data),
-        notes=fallback_notes(fit_data, hold_data, folds),
+        notes=level_notes + fallback_notes(fit_data, hold_data, folds),
         residuals={d.name: r for d, r in zip(all_data, all_res, strict=True)},
         corrected_residuals={d.name: c for d, c in zip(all_data, corrected, strict=True)},
         flights={d.name: d for d in all_data},
         unexplained=unexplained,
         learned_model=left.model,
+        z_offsets_m=z_offsets,
     )
 
 

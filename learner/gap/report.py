@@ -32,6 +32,7 @@ def figures(diagnosis: Diagnosis, closed_loop: dict[str, Any] | None) -> dict[st
     return {
         "vehicle": diagnosis.vehicle.name if diagnosis.vehicle else None,
         "left_out": diagnosis.left_out,
+        "z_offsets_m": diagnosis.z_offsets_m,
         "notes": all_notes(diagnosis, closed_loop),
         "fitting_flights": diagnosis.fitting,
         "held_out_flights": diagnosis.held_out,

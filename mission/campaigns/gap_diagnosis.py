@@ -31,10 +31,12 @@ def run_diagnosis(
     columns: Path | None = None,
     vehicle_name: str | None = None,
     replay: bool = True,
+    z_offset_m: float | None = None,
 ) -> dict[str, Any]:
     """Diagnose, replay held-out missions closed-loop, write every output; the figures.
     The vehicle is `vehicle_name`, else the world's `vehicle:` (the simulator's, nano by
-    default); a `vehicle_name` other than the world's is refused."""
+    default); a `vehicle_name` other than the world's is refused. `z_offset_m`: subtracted
+    from every log's z (default: found from where each flight rests on the ground)."""
     if folds < 2:
         raise ConfigError(f"--folds: {folds} is outside the allowed range [2, number of logs]")
     mapping = load_mapping(columns)
@@ -45,7 +47,7 @@ def run_diagnosis(
     fit_logs = [read_log(p, mapping, vehicle) for p in fitting]
     hold_logs = [read_log(p, mapping, vehicle) for p in held_out]
     try:
-        diagnosis = diagnose(fit_logs, hold_logs, world_obj, vehicle, folds)
+        diagnosis = diagnose(fit_logs, hold_logs, world_obj, vehicle, folds, z_offset_m)
     except ValueError as err:
         raise ConfigError(str(err)) from None
     out.mkdir(parents=True, exist_ok=True)

@@ -34,6 +34,12 @@ def add_parser(sub: Any) -> None:
         help="vehicle YAML or packaged name (default: the world's `vehicle:`, else nano; "
         "a vehicle other than the world's is refused)",
     )
+    d.add_argument(
+        "--z-offset", type=float, metavar="M",
+        help="subtract M from every log's z, m (the logs' frame puts the world's ground at "
+        "z = M less the vehicle's resting height); default: found from where each flight "
+        "rests on the ground, none for flights that never rest and no flight that does",
+    )  # fmt: skip
     d.add_argument("--no-replay", action="store_true", help="skip the closed-loop re-flights")
     d.add_argument("--out", type=Path, required=True, help="output folder")
     d.set_defaults(func=cmd_diagnose)
@@ -65,7 +71,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     result = run_diagnosis(
         args.logs, args.holdout, args.world, args.out, args.folds, args.columns, args.vehicle,
-        not args.no_replay,
+        not args.no_replay, args.z_offset,
     )  # fmt: skip
     for effect, e in result["effects"].items():
         params = ", ".join(f"{p} {v['value']:.4g}" for p, v in (e.get("parameters") or {}).items())
