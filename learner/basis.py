@@ -37,6 +37,7 @@ from learner.network import (
     CONTROL_COLUMNS,
     DEFAULT_LAYER_BOUND,
     LAYERS,
+    Adam,
     LipschitzProjector,
     build_network,
     export_weights,
@@ -164,11 +165,11 @@ def train_basis(
     net = build_network(LAYERS, config.seed)
     basis = torch.nn.Sequential(*list(net)[:-1])  # 12 -> 25 -> 30 -> 15, ReLU after each
     projector = LipschitzProjector(net, config.layer_bound, config.seed, control_bound)
-    optimiser = torch.optim.Adam(basis.parameters(), lr=config.learning_rate)
+    optimiser = Adam(basis.parameters(), lr=config.learning_rate)
     classifier = torch.nn.Sequential(
         torch.nn.Linear(LAYERS[-2], 20), torch.nn.ReLU(), torch.nn.Linear(20, len(names))
     )
-    classifier_opt = torch.optim.Adam(classifier.parameters(), lr=config.learning_rate)
+    classifier_opt = Adam(classifier.parameters(), lr=config.learning_rate)
     generator = torch.Generator().manual_seed(config.seed)
     steps_per_epoch = max(1, min(len(t[0]) for t in train_t.values()) // config.batch_size)
     best: tuple[float, Any, int] = (np.inf, export_weights(net), 0)

@@ -18,6 +18,7 @@ of -1 in thrust, and the controller's fixed point drifts.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterable
 
 import numpy as np
 import torch
@@ -135,3 +136,42 @@ def import_weights(
     for layer, w, b in zip(linear_layers(net), weights, biases, strict=True):
         layer.weight.copy_(torch.tensor(np.array(w), dtype=layer.weight.dtype))
         layer.bias.copy_(torch.tensor(np.array(b), dtype=layer.bias.dtype))
+
+
+class Adam:
+    """torch.optim.Adam's update (single-tensor path, L2 `weight_decay` added to the
+    gradient), without torch.optim: an optimiser's first construction imports torch._dynamo
+    (1.7 s on these machines), which a diagnosis or a flight's learner process would pay once
+    per process for a few hundred steps of a tiny network."""
+
+    def __init__(
+        self,
+        params: Iterable[torch.Tensor],
+        lr: float,
+        weight_decay: float = 0.0,
+        betas: tuple[float, float] = (0.9, 0.999),
+        eps: float = 1e-8,
+    ) -> None:
+        self.params = list(params)
+        self.lr, self.weight_decay, self.betas, self.eps = lr, weight_decay, betas, eps
+        self.m = [torch.zeros_like(p) for p in self.params]
+        self.v = [torch.zeros_like(p) for p in self.params]
+        self.steps = 0
+
+    def zero_grad(self) -> None:
+        for p in self.params:
+            p.grad = None
+
+    @torch.no_grad()
+    def step(self) -> None:
+        self.steps += 1
+        b1, b2 = self.betas
+        step_size = self.lr / (1.0 - b1**self.steps)
+        correction2_sqrt = (1.0 - b2**self.steps) ** 0.5
+        for p, m, v in zip(self.params, self.m, self.v, strict=True):
+            if p.grad is None:
+                continue
+            g = p.grad if self.weight_decay == 0.0 else p.grad.add(p, alpha=self.weight_decay)
+            m.lerp_(g, 1.0 - b1)
+            v.mul_(b2).addcmul_(g, g, value=1.0 - b2)
+            p.addcdiv_(m, (v.sqrt() / correction2_sqrt).add_(self.eps), value=-step_size)

@@ -25,7 +25,7 @@ from learner.gap.fit import Problem
 from learner.gap.flightdata import FlightData
 from learner.gap.residual import SMOOTH_WINDOW_S, force_gap_ms, smooth_per_segment
 from learner.gap.rollout import shrink
-from learner.network import linear_layers, project_lipschitz
+from learner.network import Adam, linear_layers, project_lipschitz
 from simbridge.effects.learned import FEATURES, ResidualModel, residual_features
 from simbridge.vehicle import Vehicle
 
@@ -81,7 +81,7 @@ def _train(
     net = torch.nn.Sequential(*layers)
     xt = torch.tensor((x - mean) / std, dtype=torch.float32)
     yt = torch.tensor(y / scale, dtype=torch.float32)
-    opt = torch.optim.Adam(net.parameters(), lr=3e-3, weight_decay=1e-4)
+    opt = Adam(net.parameters(), lr=3e-3, weight_decay=1e-4)
     for _ in range(EPOCHS):
         opt.zero_grad()
         loss = torch.mean((net(xt) - yt) ** 2)
