@@ -12,6 +12,7 @@ import dataclasses
 import math
 
 from simbridge.effects.actuators import (
+    freewheel_rad_s,
     motor_lag_step,
     thrust_axis_body,
     thrust_curve_forces_n,
@@ -73,6 +74,12 @@ class Simulation:
         self._wall_effect = fx.wall_effect
         self._ce_cutoff = self._ce.cutoff_for(self._radius) if self._ce else 0.0
         self._lag_tau = fx.motor_lag.time_constant_s if fx.motor_lag else None
+        # a rotor without active braking coasts down: n' >= -n^2 / (n_h tau)
+        self._coast = (
+            1.0 / (vehicle.hover_rotor_speed_rad_s * fx.spin_down.time_constant_s)
+            if fx.spin_down
+            else None
+        )
         # the thrust's direction in the body frame (body z unless it leans)
         self._axis = thrust_axis_body(*fx.thrust_tilt.lean_deg) if fx.thrust_tilt else None
         self._drag = fx.rotor_drag is not None or fx.body_drag is not None
@@ -105,6 +112,7 @@ class Simulation:
         )
 
         self._rotor_speeds: list[float] = [0.0, 0.0, 0.0, 0.0]
+        self._lag_state: list[float] = [0.0, 0.0, 0.0, 0.0]  # the lag's, before coasting
         self._heights: list[float] = [NO_HIT] * 4
         self._ge_rotor: list[float] = [0.0] * 4
         self._ge_force, self._ce_force = _zero3(), _zero3()
@@ -163,7 +171,7 @@ class Simulation:
         cid, body = self._cid, self._body
         v0, _ = pb.getBaseVelocity(body, physicsClientId=cid)
         # without motor lag or thrust decay the rotor forces hold over the control period
-        constant = self._lag_tau is None and self._decay is None
+        constant = self._lag_tau is None and self._decay is None and self._coast is None
         if constant:
             self._rotor_speeds[:] = rotor_commands_rad_s
             f = self._forces(self._rotor_speeds)
@@ -179,12 +187,16 @@ class Simulation:
         self._time_us += world.control_period_us
 
     def _lagged(self, cmd: Quad) -> list[float]:
-        n, tau, dt = self._rotor_speeds, self._lag_tau, self._dt
+        n, tau, dt, coast = self._rotor_speeds, self._lag_tau, self._dt, self._coast
+        target = n if coast is None else self._lag_state
         if tau is None:
-            n[:] = cmd
+            target[:] = cmd
         else:
             for i in range(4):
-                n[i] = motor_lag_step(n[i], cmd[i], dt, tau)
+                target[i] = motor_lag_step(target[i], cmd[i], dt, tau)
+        if coast is not None:  # up as the lag goes, down no faster than coasting
+            for i in range(4):
+                n[i] = max(target[i], freewheel_rad_s(n[i], dt, coast))
         return n
 
     def _forces(self, n: list[float]) -> Quad:

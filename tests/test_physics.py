@@ -7,7 +7,12 @@ import math
 
 import pytest
 
-from simbridge.effects.actuators import MassErrorParams, MotorLagParams, ThrustCoefficientParams
+from simbridge.effects.actuators import (
+    MassErrorParams,
+    MotorLagParams,
+    SpinDownParams,
+    ThrustCoefficientParams,
+)
 from simbridge.effects.drag import RotorDragParams, WindParams
 from simbridge.effects.ground import CeilingEffectParams, GroundEffectParams
 from simbridge.effects.proximity import WallEffectParams
@@ -145,6 +150,21 @@ def test_motor_lag_delays_the_actual_rotor_speeds():
             sim.step((100.0,) * 4)
         speeds = sim.state().rotor_speeds_rad_s
     assert speeds == pytest.approx((100.0 * (1 - math.exp(-1)),) * 4, rel=1e-6)
+
+
+def test_an_unbraked_rotor_spins_up_at_once_and_coasts_down_on_its_drag():
+    """From hover speed to a zero command: n = n_h / (1 + t / tau), half the speed after tau
+    (0.3 s); back to hover at once (no lag asked for)."""
+    world = world_with(None, spin_down=SpinDownParams(time_constant_s=0.3))
+    n_h = VEHICLE.hover_rotor_speed_rad_s
+    with Simulation(world, VEHICLE) as sim:
+        sim.step((n_h,) * 4)
+        assert sim.state().rotor_speeds_rad_s == pytest.approx((n_h,) * 4, rel=1e-12)
+        for _ in range(round(0.3 / world.control_period_s)):
+            sim.step((0.0,) * 4)
+        assert sim.state().rotor_speeds_rad_s == pytest.approx((n_h / 2,) * 4, rel=1e-9)
+        sim.step((0.9 * n_h,) * 4)  # above the coasting rotor: followed at once
+        assert sim.state().rotor_speeds_rad_s == pytest.approx((0.9 * n_h,) * 4, rel=1e-12)
 
 
 @pytest.mark.parametrize(

@@ -23,7 +23,11 @@ from scipy.signal import lfilter
 
 from learner.gap.flightdata import FlightData
 from simbridge.effects import EffectSet
-from simbridge.effects.actuators import thrust_axis_body, thrust_curve_array
+from simbridge.effects.actuators import (
+    spin_down_envelope,
+    thrust_axis_body,
+    thrust_curve_array,
+)
 from simbridge.effects.drag import BodyDragParams, RotorDragParams, body_drag_n, rotor_drag_n
 from simbridge.effects.ground import (
     CeilingEffectParams,
@@ -107,6 +111,7 @@ REFERENCE: tuple[Candidate, ...] = (
         (0.5,) * 2, ("wind",),
     ),
     Candidate("motor_lag", ("tau",), ("s",), (0.002,), (0.3,), (0.02,), ("motor_lag",)),
+    Candidate("spin_down", ("tau",), ("s",), (0.01,), (5.0,), (0.3,), ("spin_down",)),
     Candidate(
         "thrust_mass", ("c",), ("1",), (-0.5,), (1.0,), (0.05,),
         ("thrust_coefficient", "mass_error"),
@@ -165,6 +170,14 @@ PHYSICAL: dict[str, tuple[tuple[float, ...], tuple[float, ...], str]] = {
     # brushed nano motors 20-60 ms (the neural-swarm authors model 57 ms), 12-inch props up
     # to about 0.1 s
     "motor_lag": ((0.002,), (0.15,), "motors slower than any multirotor's (0.15 s to 63%)"),
+    # an unbraked rotor halves its speed from hover in I / (k_q n_h): a Crazyflie's 0.3 s, a
+    # 12-inch propeller's about 0.8 s (simbridge/effects/actuators.py SpinDownParams)
+    "spin_down": (
+        (0.02,),
+        (2.0,),
+        "rotors coasting down slower than any propeller's drag allows (2 s to halve the "
+        "speed): a command logged ahead of the motors rather than a rotor",
+    ),
     "thrust_mass": (
         (-0.3,),
         (0.3,),
@@ -327,6 +340,8 @@ def nominal_values(effects: EffectSet, vehicle: Vehicle | None = None) -> Values
         out["wind"] = np.array(effects.wind.mean_m_s[:2])  # the candidate is horizontal
     if effects.motor_lag:
         out["motor_lag"] = np.array([effects.motor_lag.time_constant_s])
+    if effects.spin_down:
+        out["spin_down"] = np.array([effects.spin_down.time_constant_s])
     if effects.thrust_tilt:
         out["thrust_tilt"] = np.array(effects.thrust_tilt.lean_deg)
     if effects.thrust_curve:
@@ -343,21 +358,27 @@ def nominal_values(effects: EffectSet, vehicle: Vehicle | None = None) -> Values
 
 
 def rotor_forces_n(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
-    """(N, 4) mean rotor thrusts over each period, through motor lag, the thrust curve about
-    a quarter of the weight and the C_T scale (after the curve, as the simulator applies it)."""
+    """(N, 4) mean rotor thrusts over each period, through motor lag and a rotor's coasting
+    down (spin_down), the thrust curve about a quarter of the weight and the C_T scale (after
+    the curve, as the simulator applies it)."""
     n = d.commands_rad_s
     c_t = vehicle.thrust_coefficient_n_s2
     scale = 1.0 + float(values["thrust_mass"][0]) if "thrust_mass" in values else 1.0
     gamma = float(values["thrust_curve"][0]) if "thrust_curve" in values else None
     pivot_n = 0.25 * vehicle.weight_n
-    if "motor_lag" not in values:
+    if "motor_lag" not in values and "spin_down" not in values:
         f = c_t * n * n
         return scale * (f if gamma is None else thrust_curve_array(f, gamma, pivot_n))
-    # exact first-order lag of commands held over each period, at the physics step
+    # commands held over each period, at the physics step
     sub = d.substeps
-    a = np.exp(-(d.dt_s / sub) / values["motor_lag"][0])
-    u = np.repeat(n, sub, axis=0)
-    y = lfilter([1.0 - a], [1.0, -a], u, axis=0, zi=(a * n[:1]))[0]
+    y = np.repeat(n, sub, axis=0)
+    if "motor_lag" in values:  # exact first-order lag
+        a = np.exp(-(d.dt_s / sub) / values["motor_lag"][0])
+        y = lfilter([1.0 - a], [1.0, -a], y, axis=0, zi=(a * n[:1]))[0]
+    if "spin_down" in values:
+        rate = 1.0 / (vehicle.hover_rotor_speed_rad_s * float(values["spin_down"][0]))
+        t = (d.time_s[:, None] + (d.dt_s / sub) * np.arange(sub)).ravel()
+        y = spin_down_envelope(y, t, np.repeat(d.segment, sub), rate)
     f = c_t * y * y
     if gamma is not None:
         f = thrust_curve_array(f, gamma, pivot_n)
@@ -441,7 +462,7 @@ def to_world_effects(values: Values, vehicle: Vehicle | None = None) -> list[dic
             out.append(entry)
         elif name == "wind":
             out.append({"name": name, "mean_m_s": [*x[:2], 0.0]})
-        elif name == "motor_lag":
+        elif name in ("motor_lag", "spin_down"):
             out.append({"name": name, "time_constant_s": x[0]})
         elif name == "thrust_mass":
             out.append({"name": "thrust_coefficient", "scale": 1.0 + x[0]})

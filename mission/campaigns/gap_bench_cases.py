@@ -82,6 +82,16 @@ def _cases() -> list[Case]:
                 kind="aggressive",
             )
         )
+    # rotors that coast down on their drag: a Crazyflie's 0.3 s, a large propeller's 0.8 s
+    for tag, tau in (("a", 0.3), ("b", 0.8)):
+        c.append(
+            Case(
+                f"spin_down_{tag}",
+                ({"name": "spin_down", "time_constant_s": tau},),
+                {"spin_down": {"tau": tau}},
+                kind="aggressive",
+            )
+        )
     # more thrust, less mass: the position loop has no integral action (thesis: a PD with
     # a0 = 1), so a thrust deficit of x g takes x g / a0 of height error: 0.7 m for 7%, and
     # such a vehicle never leaves the ground cushion of a 0.3 m take-off

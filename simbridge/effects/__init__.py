@@ -13,6 +13,7 @@ from simbridge.config import ConfigError, build
 from simbridge.effects.actuators import (
     MassErrorParams,
     MotorLagParams,
+    SpinDownParams,
     ThrustCoefficientParams,
     ThrustCurveParams,
     ThrustTiltParams,
@@ -41,6 +42,7 @@ class EffectSet:
     body_drag: BodyDragParams | None = None
     wind: WindParams | None = None
     motor_lag: MotorLagParams | None = None
+    spin_down: SpinDownParams | None = None
     thrust_coefficient: ThrustCoefficientParams | None = None
     mass_error: MassErrorParams | None = None
     thrust_tilt: ThrustTiltParams | None = None
@@ -67,6 +69,7 @@ PARAMS_BY_NAME: dict[str, type] = {
     "body_drag": BodyDragParams,
     "wind": WindParams,
     "motor_lag": MotorLagParams,
+    "spin_down": SpinDownParams,
     "thrust_coefficient": ThrustCoefficientParams,
     "mass_error": MassErrorParams,
     "thrust_tilt": ThrustTiltParams,

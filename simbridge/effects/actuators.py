@@ -1,9 +1,11 @@
-"""Actuator and inertial errors: motor lag, thrust-coefficient error, mass error, a thrust
-axis leaning from the body's z axis (a bent frame, motors mounted askew), a thrust curve (the
-rotors' thrust growing faster or slower than the modelled C_T n^2 away from hover)."""
+"""Actuator and inertial errors: motor lag, a rotor that slows only by its own drag (no active
+braking), thrust-coefficient error, mass error, a thrust axis leaning from the body's z axis
+(a bent frame, motors mounted askew), a thrust curve (the rotors' thrust growing faster or
+slower than the modelled C_T n^2 away from hover)."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -24,6 +26,45 @@ def motor_lag_step(
 ) -> float:
     """Exact solution of n' = (n_cmd - n) / tau over dt with n_cmd held constant."""
     return command_rad_s + (rotor_speed_rad_s - command_rad_s) * math.exp(-dt_s / tau_s)
+
+
+@dataclass(frozen=True)
+class SpinDownParams:
+    """A rotor whose speed controller does not brake (a brushed motor's low-side switch, an
+    ESC without active braking): above its command it slows only by its propeller's drag
+    torque, I n' = -k_q n^2, so from hover speed n_h it halves its speed in
+    `time_constant_s` = I / (k_q n_h) (n = n_h / (1 + t / tau)); towards a higher command
+    it follows as before. A Crazyflie's 46 mm propeller and motor (about 9e-8 kg m^2,
+    k_q = k_z C_T = 1.7e-10 N m s^2, n_h 1650 rad/s): 0.3 s; a 12-inch propeller on an
+    unbraked ESC about 0.8 s."""
+
+    time_constant_s: float = param(
+        0.3, unit="s", lo=0.0, hi=10.0, lo_open=True,
+        doc="a freewheeling rotor's time to halve its speed from hover",
+    )  # fmt: skip
+
+
+def freewheel_rad_s(rotor_speed_rad_s: float, dt_s: float, rate_per_rad: float) -> float:
+    """n' = -c n^2 over dt (exact): the speed a rotor coasts down to, c = 1 / (n_h tau)."""
+    return rotor_speed_rad_s / (1.0 + rotor_speed_rad_s * dt_s * rate_per_rad)
+
+
+def spin_down_envelope(
+    speeds_rad_s: np.ndarray, time_s: np.ndarray, segment: np.ndarray, rate_per_rad: float
+) -> np.ndarray:
+    """(N, k) rotor speeds following `speeds_rad_s` (N, k) up at once and down no faster
+    than freewheeling (`freewheel_rad_s`), over rows at `time_s` within each run of equal
+    `segment` values: in u = 1 / n a freewheeling rotor's u grows linearly (u' = c), so u(t)
+    is the running minimum of 1 / n(s) + c (t - s). The array form of the simulator's step."""
+    ct = (rate_per_rad * time_s)[:, None]
+    with np.errstate(divide="ignore"):
+        u = 1.0 / speeds_rad_s - ct
+    starts = [0, *(np.flatnonzero(segment[1:] != segment[:-1]) + 1).tolist(), len(u)]
+    for a, b in itertools.pairwise(starts):
+        np.minimum.accumulate(u[a:b], axis=0, out=u[a:b])
+    u += ct
+    with np.errstate(divide="ignore"):
+        return 1.0 / u
 
 
 @dataclass(frozen=True)
