@@ -25,7 +25,7 @@ def flights(folder: Path, world: Path, true: dict) -> list[Path]:
     folder.mkdir(parents=True, exist_ok=True)
     out = []
     for seed in (0, 1, 2):
-        log = synthetic_log(f"f{seed}", NANO, world, {}, seed, seconds=20.0)
+        log = synthetic_log(f"f{seed}", NANO, world, {}, seed, seconds=12.0)
         n = log.rotor_speeds_rad_s.copy()
         cut = (log.time_s % 1.0) < 0.06  # a third less speed: 56% less thrust
         n[cut] *= 2.0 / 3.0
