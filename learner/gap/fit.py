@@ -137,7 +137,6 @@ MULTI_START: dict[str, tuple[float, ...]] = {
     "ground_effect": (1.0, 4.0, 12.0),
     "ceiling_effect": (1.0, 4.0, 12.0),
     "motor_lag": (0.02, 0.08),
-    "spin_down": (0.1, 0.5),
     "sensor_latency": (0.004, 0.02),
 }
 
