@@ -12,10 +12,7 @@ import dataclasses
 import math
 
 from simbridge.effects.actuators import (
-    freewheel_rad_s,
-    motor_lag_step,
     thrust_axis_body,
-    thrust_curve_forces_n,
 )
 from simbridge.effects.drag import body_drag_n, rotor_drag_n, wind_velocity_m_s
 from simbridge.effects.ground import ground_effect_forces_n, thrust_gain
@@ -23,15 +20,14 @@ from simbridge.effects.learned import learned_force_n
 from simbridge.effects.proximity import WALL_DIRECTIONS, wall_force_n
 from simbridge.effects.uncatalogued import (
     TAKEOFF_HEIGHT_M,
-    asymmetric_forces_n,
     exponential_gain,
     outwash_force_n,
-    thrust_decay_scale,
 )
 from simbridge.frames import Vec3, xyzw_to_wxyz
 from simbridge.pybullet_quiet import pybullet as pb
 from simbridge.pybullet_world import WORLD_GROUP, build_body, build_surfaces, surface_footprints
-from simbridge.rotors import Quad, rotor_forces_n, thrust_and_moments
+from simbridge.rotor_dynamics import RotorDynamics
+from simbridge.rotors import Quad, thrust_and_moments
 from simbridge.sim_state import EffectForces, VehicleState
 from simbridge.surface_rays import VerticalRays
 from simbridge.vehicle import Vehicle
@@ -59,9 +55,7 @@ class Simulation:
         build_surfaces(self._cid, world, self._dt)
 
         # Effective physical constants of the simulated (true) vehicle.
-        self._c_t = vehicle.thrust_coefficient_n_s2 * (
-            fx.thrust_coefficient.scale if fx.thrust_coefficient else 1.0
-        )
+        self._rotors = RotorDynamics(vehicle, fx, self._dt)
         self.true_mass_kg = vehicle.mass_kg * (fx.mass_error.scale if fx.mass_error else 1.0)
         self._rotors_body = vehicle.rotor_positions_body_m()
         self._rotors_flat = tuple(c for r in self._rotors_body for c in r)  # x0, y0, z0, x1, ...
@@ -73,13 +67,6 @@ class Simulation:
         self._ce = fx.ceiling_effect
         self._wall_effect = fx.wall_effect
         self._ce_cutoff = self._ce.cutoff_for(self._radius) if self._ce else 0.0
-        self._lag_tau = fx.motor_lag.time_constant_s if fx.motor_lag else None
-        # a rotor without active braking coasts down: n' >= -n^2 / (n_h tau)
-        self._coast = (
-            1.0 / (vehicle.hover_rotor_speed_rad_s * fx.spin_down.time_constant_s)
-            if fx.spin_down
-            else None
-        )
         # the thrust's direction in the body frame (body z unless it leans)
         self._axis = thrust_axis_body(*fx.thrust_tilt.lean_deg) if fx.thrust_tilt else None
         self._drag = fx.rotor_drag is not None or fx.body_drag is not None
@@ -87,12 +74,6 @@ class Simulation:
         self._learned_force = _zero3()
         self._gex, self._outwash = fx.ground_effect_exponential, fx.ground_outwash
         self._gex_force, self._outwash_force = _zero3(), _zero3()
-        self._decay, self._asym = fx.thrust_decay, fx.rotor_asymmetry
-        self._thrust_scale = 1.0
-        # a thrust curve about the vehicle file's hover thrust (W/4), applied to the modelled
-        # thrust before any C_T scale: s (W/4) (f/(W/4))^gamma is the curve about s W/4 of s f
-        self._curve = fx.thrust_curve.gamma if fx.thrust_curve else None
-        self._curve_pivot_n = 0.25 * vehicle.weight_n * self._c_t / vehicle.thrust_coefficient_n_s2
         # one set of down rays per rotor serves every effect that reads rotor heights
         lengths = [e.ray_length_m for e in (self._ge, self._gex) if e is not None]
         self._down_m = max(lengths + ([LEARNED_RAY_M] if self._learned else []), default=None)
@@ -111,8 +92,7 @@ class Simulation:
             self._down_m is not None and self._ce is None and self._outwash is None
         )
 
-        self._rotor_speeds: list[float] = [0.0, 0.0, 0.0, 0.0]
-        self._lag_state: list[float] = [0.0, 0.0, 0.0, 0.0]  # the lag's, before coasting
+        self._rotor_speeds = self._rotors.speeds_rad_s  # one list, updated in place
         self._heights: list[float] = [NO_HIT] * 4
         self._ge_rotor: list[float] = [0.0] * 4
         self._ge_force, self._ce_force = _zero3(), _zero3()
@@ -170,48 +150,23 @@ class Simulation:
             return
         cid, body = self._cid, self._body
         v0, _ = pb.getBaseVelocity(body, physicsClientId=cid)
-        # without motor lag or thrust decay the rotor forces hold over the control period
-        constant = self._lag_tau is None and self._decay is None and self._coast is None
+        rotors = self._rotors
+        constant = rotors.constant
+        # the thrust decay's clock, the same over the step's physics steps (a lift-off found
+        # in one of them starts it at this step's time: 0 either way)
+        since = self.time_since_takeoff_s if rotors.decay is not None else 0.0
         if constant:
-            self._rotor_speeds[:] = rotor_commands_rad_s
-            f = self._forces(self._rotor_speeds)
+            f = rotors.forces(rotors.command(rotor_commands_rad_s), since)
             tm = thrust_and_moments(f, self._arm, self._kz)  # equation 3.6, body
         for _ in range(world.substeps):
             if not constant:
-                f = self._forces(self._lagged(rotor_commands_rad_s))
+                f = rotors.forces(rotors.advance(rotor_commands_rad_s), since)
                 tm = thrust_and_moments(f, self._arm, self._kz)
             self._substep(f, tm)
         v1, _ = pb.getBaseVelocity(body, physicsClientId=cid)
         inv = 1.0 / world.control_period_s
         self._acceleration = ((v1[0] - v0[0]) * inv, (v1[1] - v0[1]) * inv, (v1[2] - v0[2]) * inv)
         self._time_us += world.control_period_us
-
-    def _lagged(self, cmd: Quad) -> list[float]:
-        n, tau, dt, coast = self._rotor_speeds, self._lag_tau, self._dt, self._coast
-        target = n if coast is None else self._lag_state
-        if tau is None:
-            target[:] = cmd
-        else:
-            for i in range(4):
-                target[i] = motor_lag_step(target[i], cmd[i], dt, tau)
-        if coast is not None:  # up as the lag goes, down no faster than coasting
-            for i in range(4):
-                n[i] = max(target[i], freewheel_rad_s(n[i], dt, coast))
-        return n
-
-    def _forces(self, n: list[float]) -> Quad:
-        """Equation 3.5 with the thrust curve, the thrust decay's scale and a rotor asymmetry,
-        if any."""
-        if self._decay is None:
-            f = rotor_forces_n(self._c_t, n)
-            pivot = self._curve_pivot_n
-        else:
-            self._thrust_scale = thrust_decay_scale(self._decay, self.time_since_takeoff_s)
-            f = rotor_forces_n(self._c_t * self._thrust_scale, n)
-            pivot = self._curve_pivot_n * self._thrust_scale
-        if self._curve is not None:
-            f = thrust_curve_forces_n(f, self._curve, pivot)
-        return f if self._asym is None else asymmetric_forces_n(self._asym, f)
 
     def _substep(self, f: Quad, tm: tuple[float, float, float, float]) -> None:
         """One physics step with rotor forces `f` and their thrust and moments `tm`."""
@@ -485,7 +440,7 @@ class Simulation:
             learned_n=tuple(self._learned_force),
             ground_effect_exponential_n=tuple(self._gex_force),
             outwash_n=tuple(self._outwash_force),
-            thrust_scale=self._thrust_scale,
+            thrust_scale=self._rotors.thrust_scale,
         )
 
     def close(self) -> None:

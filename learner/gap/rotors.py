@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from learner.gap.candidates import Values, rotor_forces_n
+from learner.gap.candidates import Values
 from learner.gap.flightdata import FlightData
 from learner.gap.floor import (
     K_SE,
@@ -37,6 +37,7 @@ from learner.gap.floor import (
     se_of,
     unit_sums,
 )
+from learner.gap.rotor_forces import rotor_forces_n
 from learner.gap.stats import bootstrap_mean, bootstrap_p, holm
 from learner.gap.torque import torque_residual_n_m
 from simbridge.rotors import thrust_and_moments

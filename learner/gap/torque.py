@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from learner.gap.candidates import Values, rotor_forces_n
+from learner.gap.candidates import Values
 from learner.gap.flightdata import FlightData
 from learner.gap.residual import force_gap_ms
+from learner.gap.rotor_forces import rotor_forces_n
 from simbridge.effects.ground import CeilingEffectParams, GroundEffectParams, thrust_gain_array
 from simbridge.rotors import thrust_and_moments
 from simbridge.vehicle import Vehicle

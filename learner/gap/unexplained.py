@@ -20,11 +20,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from learner.gap.candidates import Values, rotor_forces_n
+from learner.gap.candidates import Values
 from learner.gap.fit import Problem
 from learner.gap.flightdata import FlightData
 from learner.gap.residual import SMOOTH_WINDOW_S, force_gap_ms, smooth_per_segment
 from learner.gap.rollout import shrink
+from learner.gap.rotor_forces import rotor_forces_n
 from learner.network import Adam, linear_layers, project_lipschitz
 from simbridge.effects.learned import FEATURES, ResidualModel, residual_features
 from simbridge.vehicle import Vehicle

@@ -73,25 +73,18 @@ def _cases() -> list[Case]:
                 nominal=(GE, DRAG),
             )
         )
-    for tag, tau in (("a", 0.03), ("b", 0.08)):
-        c.append(
-            Case(
-                f"motor_lag_{tag}",
-                ({"name": "motor_lag", "time_constant_s": tau},),
-                {"motor_lag": {"tau": tau}},
-                kind="aggressive",
+    # motor lags; rotors that coast down on their drag: a Crazyflie's 0.3 s, a large
+    # propeller's 0.8 s
+    for effect, taus in (("motor_lag", (0.03, 0.08)), ("spin_down", (0.3, 0.8))):
+        for tag, tau in zip(("a", "b"), taus, strict=True):
+            c.append(
+                Case(
+                    f"{effect}_{tag}",
+                    ({"name": effect, "time_constant_s": tau},),
+                    {effect: {"tau": tau}},
+                    kind="aggressive",
+                )
             )
-        )
-    # rotors that coast down on their drag: a Crazyflie's 0.3 s, a large propeller's 0.8 s
-    for tag, tau in (("a", 0.3), ("b", 0.8)):
-        c.append(
-            Case(
-                f"spin_down_{tag}",
-                ({"name": "spin_down", "time_constant_s": tau},),
-                {"spin_down": {"tau": tau}},
-                kind="aggressive",
-            )
-        )
     # more thrust, less mass: the position loop has no integral action (thesis: a PD with
     # a0 = 1), so a thrust deficit of x g takes x g / a0 of height error: 0.7 m for 7%, and
     # such a vehicle never leaves the ground cushion of a 0.3 m take-off
