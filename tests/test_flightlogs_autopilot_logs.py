@@ -376,7 +376,8 @@ def test_gap_diagnose_reads_written_autopilot_logs(tmp_path: Path) -> None:
     b = write_dataflash(tmp_path / "b.bin", known_flight(10.0, phase=1.0))
     out = tmp_path / "out"
     r = run_groundfx("gap", "diagnose", str(a), str(b), "--world", "default", "--no-replay",
-                     "--out", str(out), "--folds", "2", timeout=300)  # fmt: skip
+                     "--out", str(out), "--folds", "2", "--candidates",
+                     "thrust_mass,rotor_drag,ground_effect", timeout=300)  # fmt: skip
     assert r.returncode == 0, r.stderr
     assert "Traceback" not in r.stderr
     assert (out / "report.md").is_file() and (out / "gap.json").is_file()

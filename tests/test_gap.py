@@ -77,17 +77,27 @@ def test_diagnose_reads_renamed_columns(
     world = bench_dir / "rotor_drag_b/nominal_world.yaml"
     code = main(
         ["gap", "diagnose", *map(str, renamed), "--world", str(world), "--columns", str(mapping),
-         "--folds", "2", "--no-replay", "--out", str(tmp_path / "out")]
+         "--folds", "2", "--no-replay", "--out", str(tmp_path / "out"),
+         "--candidates", "rotor_drag,body_drag,thrust_mass,ground_effect"]
     )  # fmt: skip
     assert code == 0
     figures = json.loads((tmp_path / "out/gap.json").read_text())
     assert figures["effects"]["rotor_drag"]["status"] == "present"
+    # the search kept to --candidates, the others said so
+    assert figures["effects"]["wind"]["status"] == "not tried"
+    added = {name for step in figures["search"][1:] for name in step["set"]}
+    assert added <= {"rotor_drag", "body_drag", "thrust_mass", "ground_effect"}
     assert "rotor_drag" in capsys.readouterr().out
     # a bad mapping names the column
     mapping.write_text(yaml.safe_dump({"names": {"time_s": "nope"}}))
     assert main(["gap", "diagnose", str(renamed[0]), "--world", str(world), "--columns",
                  str(mapping), "--no-replay", "--out", str(tmp_path / "bad")]) == 2  # fmt: skip
     assert "missing column 'nope'" in capsys.readouterr().err
+    # an unknown candidate is refused before any log is read, naming the known ones
+    assert main(["gap", "diagnose", str(renamed[0]), "--world", str(world), "--candidates",
+                 "rotor_drag,rotor_dreg", "--out", str(tmp_path / "bad")]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "unknown candidate 'rotor_dreg'" in err and "ground_effect" in err
 
 
 def test_diagnose_reads_recordings(bench_dir: Path, drag: dict, tmp_path: Path) -> None:
@@ -105,7 +115,8 @@ def test_diagnose_reads_recordings(bench_dir: Path, drag: dict, tmp_path: Path) 
     recordings = [str(folder / f"flight{s}.truth.rrd") for s in (0, 1, 100)]
     world = str(folder / "nominal_world.yaml")
     code = main(["gap", "diagnose", *recordings[:2], "--holdout", recordings[2], "--world", world,
-                 "--folds", "2", "--no-replay", "--out", str(tmp_path / "out")])  # fmt: skip
+                 "--folds", "2", "--no-replay", "--out", str(tmp_path / "out"),
+                 "--candidates", "rotor_drag,body_drag,wind,thrust_mass"])  # fmt: skip
     assert code == 0
     figures = json.loads((tmp_path / "out/gap.json").read_text())
     drag_fit = figures["effects"]["rotor_drag"]

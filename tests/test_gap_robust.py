@@ -128,6 +128,10 @@ def write_flights(folder: Path, vehicle: Vehicle, world: Path, true: dict, seeds
     ]
 
 
+# where the search itself is not under test: a few candidates, the diagnosis 2-3x faster
+FEW = ["thrust_mass", "body_drag", "rotor_drag", "ground_effect"]
+
+
 def cli(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "-m", "mission.cli", "gap", "diagnose", *args],
@@ -182,7 +186,7 @@ def test_short_stretches_and_contact_with_any_surface_are_left_out_and_counted(
         )  # fmt: skip
         logs.append(write_log(log, tmp_path / f"f{seed}.csv"))
     out = tmp_path / "out"
-    run_diagnosis(logs, [], str(world), out, folds=2, replay=False)
+    run_diagnosis(logs, [], str(world), out, folds=2, replay=False, candidates=FEW)
     figures = json.loads((out / "gap.json").read_text())
     left = figures["left_out"]
     # per flight: contact 30 + 5 + 10 on the ground and 20 on the box; hops of 1 and 7 rows
@@ -219,7 +223,7 @@ def test_a_corrected_world_that_cannot_fly_its_replay_is_reported_and_the_report
                          meta={"mission": str(mission)})  # fmt: skip
     out = tmp_path / "out"
     done = cli(*map(str, fit), "--holdout", str(held[0]), "--world", str(world),
-               "--folds", "2", "--out", str(out))  # fmt: skip
+               "--folds", "2", "--out", str(out), "--candidates", ",".join(FEW))  # fmt: skip
     assert done.returncode == 0, done.stderr
     figures = json.loads((out / "gap.json").read_text())
     assert figures["chosen"]["thrust_mass"][0] == pytest.approx(-0.28, abs=0.01)
@@ -267,7 +271,9 @@ def test_the_worlds_vehicle_is_used_and_a_conflicting_vehicle_refused(tmp_path: 
     world = world_file(tmp_path / "world.yaml", vehicle=str(big))
     logs = write_flights(tmp_path / "logs", load_vehicle(big), world, {}, seeds=(0, 1),
                          seconds=10.0)  # fmt: skip
-    result = run_diagnosis(logs, [], str(world), tmp_path / "out", folds=2, replay=False)
+    result = run_diagnosis(
+        logs, [], str(world), tmp_path / "out", folds=2, replay=False, candidates=FEW
+    )
     assert result["vehicle"] == "big10"
     done = cli(*map(str, logs), "--world", str(world), "--vehicle", "nano", "--no-replay",
                "--out", str(tmp_path / "out2"))  # fmt: skip
@@ -275,7 +281,9 @@ def test_the_worlds_vehicle_is_used_and_a_conflicting_vehicle_refused(tmp_path: 
     assert "is not the world's vehicle" in done.stderr and "big10" in done.stderr
     # the same vehicle under another name is no conflict
     renamed = vehicle_file(scaled_vehicle(NANO, 10.0, "other"), tmp_path / "other.yaml")
-    again = run_diagnosis(logs, [], str(world), tmp_path / "out3", 2, None, str(renamed), False)
+    again = run_diagnosis(
+        logs, [], str(world), tmp_path / "out3", 2, None, str(renamed), False, candidates=FEW
+    )
     assert again["vehicle"] == "other"
 
 
@@ -289,7 +297,7 @@ def test_fallbacks_are_stated_one_fitting_flight_and_no_mission(tmp_path: Path) 
     held = write_flights(tmp_path / "logs", NANO, world, true, seeds=(1,), seconds=20.0)
     out = tmp_path / "out"
     done = cli(str(fit[0]), "--holdout", str(held[0]), "--world", str(world), "--folds", "3",
-               "--out", str(out))  # fmt: skip
+               "--out", str(out), "--candidates", ",".join(FEW))  # fmt: skip
     assert done.returncode == 0, done.stderr
     figures = json.loads((out / "gap.json").read_text())
     notes = " ".join(figures["notes"])
@@ -303,7 +311,9 @@ def test_fallbacks_are_stated_one_fitting_flight_and_no_mission(tmp_path: Path) 
     assert "--folds 3 asked" in report
     assert "note: closed-loop replay skipped" in done.stdout
     # no held-out flight either: the gap is in-sample, and said so
-    alone = run_diagnosis(fit, [], str(world), tmp_path / "alone", folds=3, replay=False)
+    alone = run_diagnosis(
+        fit, [], str(world), tmp_path / "alone", folds=3, replay=False, candidates=FEW
+    )
     assert alone["gap"]["in_sample"] is True
     assert "in-sample" in (tmp_path / "alone/report.md").read_text()
 

@@ -11,7 +11,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from learner.gap.candidates import CANDIDATES, Candidate, Values, catalogue, world_force
-from learner.gap.flightdata import FlightData
+from learner.gap.flightdata import FlightData, every_nth
 from learner.gap.residual import residual_n, smooth_per_segment
 from learner.gap.stats import wald_p
 from simbridge.vehicle import Vehicle
@@ -26,6 +26,9 @@ MIN_SIZE = 0.25  # an effect smaller than this share of its catalogue magnitude 
 # significant but tiny companion (ground effect rho 2.5 leaves a 1 ms "latency", p 1e-37)
 COLLINEAR_R2 = 0.98  # above: the data cannot tell two candidates apart
 DRAGS = ("rotor_drag", "body_drag")
+# effects whose force at a row depends on the rows before it (a lag, a coasting rotor, a late
+# sensor); without them a fit computes its model on the scored rows only
+HISTORY = ("motor_lag", "spin_down", "sensor_latency")
 
 
 @dataclass
@@ -39,6 +42,7 @@ class Problem:
     nominal_force: list[np.ndarray] = field(default_factory=list)
     ess_ratio: float = 1.0
     noise_var: float = 1.0
+    _thinned: Problem | None = field(default=None, repr=False, compare=False)
 
     @property
     def catalogue(self) -> dict[str, Candidate]:
@@ -59,6 +63,23 @@ class Problem:
             self.ess_ratio,
             self.noise_var,
         )
+
+    def scored(self, names: tuple[str, ...]) -> tuple[Problem, list[slice]]:
+        """The problem whose `predicted` a fit of `names` scores, and the rows it scores:
+        every STRIDE-th row; computed on those rows only when no effect needs the rows
+        between them (HISTORY), the same figures for half the work."""
+        every = [slice(None, None, STRIDE)] * len(self.flights)
+        if any(h in names or h in self.nominal for h in HISTORY):
+            return self, every
+        if self._thinned is None:
+            self._thinned = Problem(
+                [every_nth(d, STRIDE) for d in self.flights],
+                [r[::STRIDE] for r in self.residuals],
+                self.nominal,
+                self.vehicle,
+                [f[::STRIDE] for f in self.nominal_force],
+            )
+        return self._thinned, [slice(None)] * len(self.flights)
 
     def predicted(self, values: Values) -> list[np.ndarray]:
         """Each flight's residual the overriding `values` predict."""
@@ -146,11 +167,12 @@ def fit(
     names: tuple[str, ...],
     max_nfev: int | None = None,
     start: Values | None = None,
+    multi_start: bool = True,
 ) -> Fit:
     """Least squares of the candidates `names` (with the nominal world's other effects);
     `max_nfev`: at most this many evaluations (an approximate fit is enough); `start`: the
     values a previous fit found (a warm start); a non-convex candidate without one gets the
-    starts of MULTI_START, the best kept."""
+    starts of MULTI_START, the best kept (unless not `multi_start`)."""
     rows = [slice(None, None, STRIDE)] * len(problem.flights)
     target = np.concatenate([r[s].ravel() for r, s in zip(problem.residuals, rows, strict=True)])
     n = len(target)
@@ -170,7 +192,7 @@ def fit(
     starts = [x0]
     offset = 0
     for c, part in zip(names, parts, strict=True):
-        if c in MULTI_START and c not in start:
+        if multi_start and c in MULTI_START and c not in start:
             for v in MULTI_START[c]:
                 x = x0.copy()
                 x[offset] = np.clip(v / scale[offset], lo[offset], hi[offset])
@@ -178,9 +200,12 @@ def fit(
                     starts.append(x)
         offset += len(part)
 
+    model, model_rows = problem.scored(names)
+
     def fun(x: np.ndarray) -> np.ndarray:
-        pred = problem.predicted(_unpack(x * scale, names))
-        return np.concatenate([p[s].ravel() for p, s in zip(pred, rows, strict=True)]) - target
+        pred = model.predicted(_unpack(x * scale, names))
+        pred = [p[s] for p, s in zip(pred, model_rows, strict=True)]
+        return np.concatenate([p.ravel() for p in pred]) - target
 
     sol = min(
         (

@@ -45,6 +45,18 @@ class FlightData:
     left_out: dict = dataclasses.field(default_factory=dict)  # rows left out, counted
 
 
+def every_nth(d: FlightData, step: int) -> FlightData:
+    """Every `step`-th row of `d` (each still one control period): the rows a fit scores, for
+    the effects whose force at a row depends on that row alone."""
+    n = len(d.time_s)
+    rows = {
+        f.name: getattr(d, f.name)[::step]
+        for f in dataclasses.fields(d)
+        if isinstance(getattr(d, f.name), np.ndarray) and len(getattr(d, f.name)) == n
+    }
+    return dataclasses.replace(d, **rows)
+
+
 def quat_to_matrices(q: np.ndarray) -> np.ndarray:
     """(N, 4) w, x, y, z -> (N, 3, 3) rotation matrices, the quaternions normalised first."""
     return frames.quat_to_matrices(q / np.linalg.norm(q, axis=1, keepdims=True))

@@ -28,11 +28,13 @@ def effect_report(
     excited: list[str],
     trail: list[dict] | None = None,
     tried: list[str] | None = None,
+    asked: list[str] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Each catalogue effect: present; implausible (the data want it, at a value outside its
     physical range: the value and what it would mean), at bound (its fit ended on a bound of
     the search), not identifiable (not excited, not a candidate for these logs, cancelling or
-    indistinguishable from another: the group is named); else absent. With 95% CIs."""
+    indistinguishable from another: the group is named); not tried (left out by `asked`, the
+    user's --candidates); else absent. With 95% CIs."""
     tried = list(CANDIDATES) if tried is None else tried
     refused = _refused(trail or [])
     sens = {c: gapfit.sensitivities(problem, c, {**best.values}) for c in excited if c in tried}
@@ -77,6 +79,9 @@ def effect_report(
                 entry["why"] = "indistinguishable in the data: " + ", ".join(members)
             else:
                 entry["status"] = "present"
+        elif asked is not None and name not in asked:
+            entry["status"] = "not tried"
+            entry["why"] = "left out of the search (--candidates)"
         elif name not in tried:
             entry["status"] = "not identifiable"
             entry["why"] = (

@@ -13,7 +13,7 @@ import yaml
 
 from learner.flightlogs.readers import read_log
 from learner.flightlogs.tables import load_mapping
-from learner.gap.diagnose import diagnose
+from learner.gap.diagnose import check_candidates, diagnose
 from learner.gap.report import corrected_world_yaml, figures, write_outputs
 from learner.gap.rollout import shrink, tracking_difference_m
 from mission.campaigns.gap_flights import fly_log
@@ -32,13 +32,19 @@ def run_diagnosis(
     vehicle_name: str | None = None,
     replay: bool = True,
     z_offset_m: float | None = None,
+    candidates: list[str] | None = None,
 ) -> dict[str, Any]:
     """Diagnose, replay held-out missions closed-loop, write every output; the figures.
     The vehicle is `vehicle_name`, else the world's `vehicle:` (the simulator's, nano by
     default); a `vehicle_name` other than the world's is refused. `z_offset_m`: subtracted
-    from every log's z (default: found from where each flight rests on the ground)."""
+    from every log's z (default: found from where each flight rests on the ground);
+    `candidates`: the catalogue candidates the search may choose (default: all)."""
     if folds < 2:
         raise ConfigError(f"--folds: {folds} is outside the allowed range [2, number of logs]")
+    try:
+        check_candidates(candidates)
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
     mapping = load_mapping(columns)
     world_path = resolve_world_path(world)
     world_obj = load_world(world_path)
@@ -47,7 +53,9 @@ def run_diagnosis(
     fit_logs = [read_log(p, mapping, vehicle) for p in fitting]
     hold_logs = [read_log(p, mapping, vehicle) for p in held_out]
     try:
-        diagnosis = diagnose(fit_logs, hold_logs, world_obj, vehicle, folds, z_offset_m)
+        diagnosis = diagnose(
+            fit_logs, hold_logs, world_obj, vehicle, folds, z_offset_m, candidates
+        )
     except ValueError as err:
         raise ConfigError(str(err)) from None
     out.mkdir(parents=True, exist_ok=True)

@@ -40,6 +40,11 @@ def add_parser(sub: Any) -> None:
         "z = M less the vehicle's resting height); default: found from where each flight "
         "rests on the ground, none for flights that never rest and no flight that does",
     )  # fmt: skip
+    d.add_argument(
+        "--candidates", metavar="NAME,...",
+        help="comma-separated catalogue candidates the search may choose from (default: all; "
+        "the others are reported as not tried), e.g. ground_effect,thrust_mass,motor_lag",
+    )  # fmt: skip
     d.add_argument("--no-replay", action="store_true", help="skip the closed-loop re-flights")
     d.add_argument("--out", type=Path, required=True, help="output folder")
     d.set_defaults(func=cmd_diagnose)
@@ -72,6 +77,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     result = run_diagnosis(
         args.logs, args.holdout, args.world, args.out, args.folds, args.columns, args.vehicle,
         not args.no_replay, args.z_offset,
+        args.candidates.split(",") if args.candidates else None,
     )  # fmt: skip
     for effect, e in result["effects"].items():
         params = ", ".join(f"{p} {v['value']:.4g}" for p, v in (e.get("parameters") or {}).items())
