@@ -383,3 +383,37 @@ def test_an_effect_beyond_the_physical_range_is_reported_implausible(tmp_path: P
     assert sentence in (out / "report.md").read_text()
     assert "ground_effect        implausible (rho " in done.stdout
     assert "ground_effect" not in (out / "corrected_world.yaml").read_text()
+
+
+def test_a_fit_of_row_wise_effects_on_the_scored_rows_alone_gives_the_same_answer(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`Problem.scored`: without an effect that needs the rows between the scored ones (a
+    lag, a coasting rotor, a late sensor), a fit computes its model on every STRIDE-th row
+    only; its values, errors and criterion are those of the model computed on every row."""
+    from learner.gap import fit as gapfit
+    from learner.gap.fit import fit, problem_for
+
+    world = world_file(tmp_path / "world.yaml", effects=[{"name": "ground_effect", "rho": 1.0}])
+    true = {"rotor_drag": np.array([8e-5, 3e-5]), "ground_effect": np.array([2.0])}
+    w = load_world(world)
+    logs = [synthetic_log(f"f{s}", NANO, world, true, s, seconds=8.0, low_m=0.06) for s in (0, 1)]
+    problem = problem_for([prepare(log, w, NANO) for log in logs], nominal_values(w.effects), NANO)
+    names = ("rotor_drag", "ground_effect", "thrust_mass")
+    assert problem.scored(names)[0] is not problem  # thinned
+    thinned = fit(problem, names)
+    # every row computed, every STRIDE-th scored: as for an effect with a history
+    monkeypatch.setattr(
+        gapfit.Problem,
+        "scored",
+        lambda self, names: (self, [slice(None, None, gapfit.STRIDE)] * len(self.flights)),
+    )
+    full = fit(problem, names)
+    monkeypatch.undo()
+    for name in names:
+        np.testing.assert_allclose(thinned.values[name], full.values[name], rtol=1e-12)
+        np.testing.assert_allclose(thinned.stderr[name], full.stderr[name], rtol=1e-9)
+    assert thinned.bic == pytest.approx(full.bic, rel=1e-12)
+    assert thinned.values["ground_effect"][0] == pytest.approx(2.0, rel=0.05)
+    # a lag needs every row: not thinned
+    assert problem.scored((*names, "motor_lag"))[0] is problem
