@@ -10,6 +10,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+import mission.cli  # noqa: F401  (before numpy: one BLAS thread, as the command line runs)
+
 os.environ.setdefault("MAVLINK20", "1")
 
 

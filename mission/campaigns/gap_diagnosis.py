@@ -53,9 +53,7 @@ def run_diagnosis(
     fit_logs = [read_log(p, mapping, vehicle) for p in fitting]
     hold_logs = [read_log(p, mapping, vehicle) for p in held_out]
     try:
-        diagnosis = diagnose(
-            fit_logs, hold_logs, world_obj, vehicle, folds, z_offset_m, candidates
-        )
+        diagnosis = diagnose(fit_logs, hold_logs, world_obj, vehicle, folds, z_offset_m, candidates)
     except ValueError as err:
         raise ConfigError(str(err)) from None
     out.mkdir(parents=True, exist_ok=True)
