@@ -59,3 +59,26 @@ def test_a_coasting_rotor_is_named_and_told_from_a_motor_lag(
     assert figures["effects"][absent]["status"] != "present"
     assert sorted(figures["chosen"]) == [named[0]]
     assert figures["gap"]["force_rms_n"]["shrink"] >= 0.8
+
+
+def test_a_lag_alone_at_the_row_rate_is_the_physics_step_filter(tmp_path: Path) -> None:
+    """`rotor_forces_n` with a motor lag and neither a coasting rotor nor a thrust curve
+    computes each period's mean thrust in closed form at the row rate: the same figures as
+    the lag filtered at every physics step and averaged over the period."""
+    from scipy.signal import lfilter
+
+    from learner.gap.rotor_forces import rotor_forces_n
+
+    world = world_file(tmp_path / "world.yaml")
+    log = synthetic_log("f0", NANO, world, {}, 0, seconds=6.0)
+    n = log.rotor_speeds_rad_s.copy()
+    n[(log.time_s % 1.0) < 0.06] *= 2.0 / 3.0  # steps for the lag to follow
+    d = prepare(dataclasses.replace(log, rotor_speeds_rad_s=n), load_world(world), NANO)
+    assert d.substeps == 10  # 100 Hz rows, 1 kHz physics
+    for tau in (0.005, 0.04, 0.15):
+        a = np.exp(-(d.dt_s / d.substeps) / tau)
+        y = np.repeat(d.commands_rad_s, d.substeps, axis=0)
+        y = lfilter([1.0 - a], [1.0, -a], y, axis=0, zi=a * d.commands_rad_s[:1])[0]
+        steps = NANO.thrust_coefficient_n_s2 * (y * y).reshape(len(n), d.substeps, 4).mean(axis=1)
+        row_rate = rotor_forces_n({"motor_lag": np.array([tau])}, d, NANO)
+        np.testing.assert_allclose(row_rate, steps, rtol=1e-12)

@@ -29,8 +29,11 @@ def rotor_forces_n(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarra
     if "motor_lag" not in values:  # coasting alone: computed on the rows where a rotor coasts
         rate = 1.0 / (vehicle.hover_rotor_speed_rad_s * float(values["spin_down"][0]))
         return scale * _coasting_forces_n(n, d, rate, c_t, gamma, pivot_n)
-    # commands held over each period, at the physics step
     sub = d.substeps
+    if "spin_down" not in values and gamma is None:  # a lag alone: its closed form per row
+        a = float(np.exp(-(d.dt_s / sub) / values["motor_lag"][0]))
+        return scale * c_t * _lagged_square_means(n, a, sub)
+    # commands held over each period, at the physics step
     y = np.repeat(n, sub, axis=0)
     if "motor_lag" in values:  # exact first-order lag
         a = np.exp(-(d.dt_s / sub) / values["motor_lag"][0])
@@ -43,6 +46,20 @@ def rotor_forces_n(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarra
     if gamma is not None:
         f = thrust_curve_array(f, gamma, pivot_n)
     return scale * f.reshape(len(n), sub, 4).mean(axis=1)
+
+
+def _lagged_square_means(n: np.ndarray, a: float, sub: int) -> np.ndarray:
+    """(N, 4) the mean of y^2 over each period's `sub` physics steps, y the exact
+    first-order lag (pole `a` per step, from y = n[0]) of the commands `n` held over each
+    period: what the physics-step filter gives, at the row rate. Within a period
+    y_j = n + (y_start - n) a^j (j = 1..sub), so the mean of y^2 takes two geometric sums."""
+    per_row = a**sub
+    end = lfilter([1.0 - per_row], [1.0, -per_row], n, axis=0, zi=per_row * n[:1])[0]
+    start = np.vstack([n[:1], end[:-1]])
+    powers = a ** np.arange(1, sub + 1)
+    s1, s2 = float(powers.mean()), float((powers * powers).mean())
+    e = start - n
+    return n * n + 2.0 * s1 * n * e + s2 * e * e
 
 
 def _coasting_forces_n(
