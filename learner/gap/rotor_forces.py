@@ -17,7 +17,8 @@ Values = dict[str, np.ndarray]  # candidate name -> its parameters
 def rotor_forces_n(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
     """(N, 4) mean rotor thrusts over each period, through motor lag and a rotor's coasting
     down (spin_down), the thrust curve about a quarter of the weight and the C_T scale (after
-    the curve, as the simulator applies it)."""
+    the curve, as the simulator applies it). At the physics step where the dynamics need it;
+    a lag alone in its closed form per row, coasting alone on the rows where a rotor coasts."""
     n = d.commands_rad_s
     c_t = vehicle.thrust_coefficient_n_s2
     scale = 1.0 + float(values["thrust_mass"][0]) if "thrust_mass" in values else 1.0
