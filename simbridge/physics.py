@@ -11,9 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from simbridge.effects.actuators import (
-    thrust_axis_body,
-)
+from simbridge.effects.actuators import thrust_axis_body
 from simbridge.effects.drag import body_drag_n, rotor_drag_n, wind_velocity_m_s
 from simbridge.effects.ground import ground_effect_forces_n, thrust_gain
 from simbridge.effects.learned import learned_force_n
@@ -92,7 +90,6 @@ class Simulation:
             self._down_m is not None and self._ce is None and self._outwash is None
         )
 
-        self._rotor_speeds = self._rotors.speeds_rad_s  # one list, updated in place
         self._heights: list[float] = [NO_HIT] * 4
         self._ge_rotor: list[float] = [0.0] * 4
         self._ge_force, self._ce_force = _zero3(), _zero3()
@@ -265,7 +262,7 @@ class Simulation:
             force[1] += ow[1]
             self._outwash_force[:] = ow
         if self._drag:
-            self._apply_drag(force, m, self._rotor_speeds)
+            self._apply_drag(force, m, self._rotors.speeds_rad_s)
         if self._learned is not None:
             self._apply_learned(force, m, f, heights)
 
@@ -417,7 +414,7 @@ class Simulation:
             velocity_m_s=tuple(vel),
             angular_velocity_body_rad_s=omega_body,
             acceleration_m_s2=self._acceleration,
-            rotor_speeds_rad_s=tuple(self._rotor_speeds),
+            rotor_speeds_rad_s=tuple(self._rotors.speeds_rad_s),
             range_m=self._range(pos, m),
         )
 

@@ -23,9 +23,7 @@ import numpy as np
 from learner.gap.flightdata import FlightData
 from learner.gap.rotor_forces import Values, rotor_forces_n
 from simbridge.effects import EffectSet
-from simbridge.effects.actuators import (
-    thrust_axis_body,
-)
+from simbridge.effects.actuators import thrust_axis_body
 from simbridge.effects.drag import BodyDragParams, RotorDragParams, body_drag_n, rotor_drag_n
 from simbridge.effects.ground import (
     CeilingEffectParams,

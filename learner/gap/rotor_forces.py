@@ -27,20 +27,21 @@ def rotor_forces_n(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarra
     if "motor_lag" not in values and "spin_down" not in values:
         f = c_t * n * n
         return scale * (f if gamma is None else thrust_curve_array(f, gamma, pivot_n))
+    rate = (
+        1.0 / (vehicle.hover_rotor_speed_rad_s * float(values["spin_down"][0]))
+        if "spin_down" in values
+        else None
+    )
     if "motor_lag" not in values:  # coasting alone: computed on the rows where a rotor coasts
-        rate = 1.0 / (vehicle.hover_rotor_speed_rad_s * float(values["spin_down"][0]))
+        assert rate is not None
         return scale * _coasting_forces_n(n, d, rate, c_t, gamma, pivot_n)
     sub = d.substeps
-    if "spin_down" not in values and gamma is None:  # a lag alone: its closed form per row
-        a = float(np.exp(-(d.dt_s / sub) / values["motor_lag"][0]))
+    a = float(np.exp(-(d.dt_s / sub) / values["motor_lag"][0]))  # the lag's pole per step
+    if rate is None and gamma is None:  # a lag alone: its closed form per row
         return scale * c_t * _lagged_square_means(n, a, sub)
-    # commands held over each period, at the physics step
-    y = np.repeat(n, sub, axis=0)
-    if "motor_lag" in values:  # exact first-order lag
-        a = np.exp(-(d.dt_s / sub) / values["motor_lag"][0])
-        y = lfilter([1.0 - a], [1.0, -a], y, axis=0, zi=(a * n[:1]))[0]
-    if "spin_down" in values:
-        rate = 1.0 / (vehicle.hover_rotor_speed_rad_s * float(values["spin_down"][0]))
+    # the exact first-order lag of commands held over each period, at the physics step
+    y = lfilter([1.0 - a], [1.0, -a], np.repeat(n, sub, axis=0), axis=0, zi=(a * n[:1]))[0]
+    if rate is not None:
         t = (d.time_s[:, None] + (d.dt_s / sub) * np.arange(sub)).ravel()
         y = spin_down_envelope(y, t, np.repeat(d.segment, sub), rate)
     f = c_t * y * y
