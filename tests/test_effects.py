@@ -16,6 +16,7 @@ from simbridge.effects.drag import (
     wind_velocity_m_s,
 )
 from simbridge.effects.ground import (
+    MAX_CUTOFF_GAIN,
     GroundEffectParams,
     cutoff_height_m,
     ground_effect_force_n,
@@ -38,6 +39,17 @@ def equation_3_4(n: float, z: float, rho: float) -> float:
 def test_cutoff_is_the_smallest_two_decimal_height_above_the_singularity(rho, cutoff):
     assert cutoff_height_m(rho, R) == pytest.approx(cutoff)
     assert cutoff_height_m(rho, R) > singular_height_m(rho, R) > cutoff_height_m(rho, R) - 0.01
+
+
+@pytest.mark.parametrize("rho", [2.5, 2.7, 2.8, 2.88, 5.9, 6.0, 12.0])
+def test_cutoff_never_multiplies_a_rotors_thrust_more_than_tenfold(rho):
+    """Just above the singularity the thesis's rule would (29 times at rho 2.8): such rho
+    take the next centimetre, where the gain is modest."""
+    cut = cutoff_height_m(rho, R)
+    gain = equation_3_4(1000.0, cut, rho) / (C_T * 1000.0**2)
+    assert 0.0 < gain <= MAX_CUTOFF_GAIN
+    assert cut > singular_height_m(rho, R)
+    assert round(cut * 100) == pytest.approx(cut * 100)  # whole centimetres still
 
 
 @pytest.mark.parametrize("rho", [1.0, 2.0])

@@ -128,3 +128,16 @@ def test_a_group_member_says_what_it_would_take_in_the_others_place() -> None:
     assert text == "; in its place it would take ax 2.67 deg, ay -0.924 deg"
     assert _carry_text("mass_error", {"c": 0.05}) == "; in its place it would take c 0.05"
     assert _carry_text("wind", None) == ""
+
+
+def test_a_bias_beside_a_lean_is_told_apart_where_the_logs_measure_the_bias() -> None:
+    """Fitted together, a bias and a lean pass as two effects only where the logged
+    acceleration's mean departs from the velocity's change as the fitted bias says (its own
+    share, not the lean's): the gap bench's `bias_and_tilt` flies it."""
+    bias = np.array([-0.29, 0.22, 0.1])  # what a fitted bias puts in the residual, m/s^2
+    assert bias_or_tilt.measured_bias(bias, np.array([-0.30, 0.20, 0.0]))
+    # the logs show none of it (a force moved the velocity) or a different one
+    assert not bias_or_tilt.measured_bias(bias, np.zeros(3))
+    assert not bias_or_tilt.measured_bias(bias, np.array([0.3, -0.2, 0.0]))
+    # a bias too small for the logged offset to judge
+    assert not bias_or_tilt.measured_bias(np.array([0.01, 0.0, 0.0]), np.array([0.01, 0, 0]))

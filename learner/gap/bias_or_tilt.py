@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from learner.gap.candidates import Values
+from learner.gap.fit import Problem
 from learner.gap.flightdata import FlightData
 
 # the logged acceleration's mean offset must account for at least this share of what the
@@ -68,6 +70,30 @@ def ruled_out(other: str, member: np.ndarray, logged: np.ndarray) -> str | None:
             f"horizontally, against the {size:.3f} m/s^2 a bias would leave: a real force"
         )
     return None
+
+
+def measured_bias(member: np.ndarray, logged: np.ndarray) -> bool:
+    """Whether the logged acceleration measures the horizontal offset `member` (m/s^2) that a
+    fitted bias puts in the residual: at least MIN_OFFSET_M_S2, and the logged offset within
+    SHARE of it. Then the bias is told from a lean beside it by the logs themselves."""
+    m, g = np.asarray(member)[:2], np.asarray(logged)[:2]
+    size = float(np.linalg.norm(m))
+    return size >= MIN_OFFSET_M_S2 and float(np.linalg.norm(g - m)) <= SHARE * size
+
+
+def told_apart(problem: Problem, values: Values) -> bool:
+    """Whether a bias and a lean fitted together (`values` holds both) are each what the logs
+    say: the residual cannot tell them apart at one heading, but the logged acceleration's
+    mean departs from the velocity's change by the bias alone (a lean is a real force, which
+    moves the velocity too)."""
+    if not set(values) >= BIAS_OR_TILT:
+        return False
+    logged = logged_offset_m_s2(problem.flights)
+    if logged is None:
+        return False
+    rest = {k: v for k, v in values.items() if k != "sensor_bias"}
+    bias = [a - b for a, b in zip(problem.predicted(values), problem.predicted(rest), strict=True)]
+    return measured_bias(member_offset_m_s2(np.concatenate(bias), problem.vehicle.mass_kg), logged)
 
 
 def contradicted(name: str, contribution_n: np.ndarray, logged: np.ndarray | None,

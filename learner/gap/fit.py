@@ -13,7 +13,7 @@ from scipy.optimize import least_squares
 from learner.gap.candidates import CANDIDATES, Candidate, Values, catalogue, world_force
 from learner.gap.flightdata import FlightData, every_nth
 from learner.gap.residual import residual_n, smooth_per_segment
-from learner.gap.stats import wald_p
+from learner.gap.stats import trimmed_variance, wald_p
 from simbridge.vehicle import Vehicle
 
 STRIDE = 2  # fit on every 2nd row: neighbours are strongly correlated anyway
@@ -111,12 +111,13 @@ def problem_for(flights: list[FlightData], nominal: Values, vehicle: Vehicle) ->
 
 
 def noise_variance(residuals: list[np.ndarray], flights: list[FlightData]) -> float:
-    """Per-component variance of the residual's fast part (minus a 5-row moving average)."""
+    """Per-component variance of the residual's fast part (minus a 5-row moving average),
+    without the values beyond TRIM_SDS robust standard deviations (see `trimmed_variance`)."""
     parts = [
         r - smooth_per_segment(r, d.segment, 5) for r, d in zip(residuals, flights, strict=True)
     ]
     fast = np.concatenate(parts)
-    return float(np.var(fast) * 5.0 / 4.0)  # the average shares 1/5 of each sample's noise
+    return trimmed_variance(fast) * 5.0 / 4.0  # the average shares 1/5 of each sample's noise
 
 
 def start_values(name: str, nominal: Values, cat: dict[str, Candidate] | None = None) -> np.ndarray:

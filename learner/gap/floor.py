@@ -15,7 +15,7 @@ import numpy as np
 
 from learner.gap.flightdata import FlightData
 from learner.gap.residual import smooth_per_segment
-from learner.gap.stats import effective_sample_size
+from learner.gap.stats import effective_sample_size, trimmed_variance
 
 # Blocks of this length are the bootstrap's units with fewer than MIN_FLIGHTS flights: long
 # against the residual's correlation (a 0.1 s smoothing, gusts of a second or two), short
@@ -74,9 +74,11 @@ def noise_level(series: list[np.ndarray], flights: list[FlightData]) -> tuple[np
         ess += float(np.mean([effective_sample_size(f[:, j]) for j in range(f.shape[1])]))
         rows += len(f)
     all_fast = np.concatenate(fast)
-    # the moving average takes 1/window of each sample's own noise out with it
+    # the moving average takes 1/window of each sample's own noise out with it; rows of a
+    # force that changes within a row or two are no noise (`trimmed_variance`)
     window = max(1, round(SLOW_S / flights[0].dt_s))
-    sd = np.std(all_fast, axis=0) * np.sqrt(window / max(window - 1, 1))
+    spread = [np.sqrt(trimmed_variance(all_fast[:, j])) for j in range(all_fast.shape[1])]
+    sd = np.array(spread) * np.sqrt(window / max(window - 1, 1))
     return sd, min(1.0, ess / rows) if rows else 1.0
 
 

@@ -155,6 +155,14 @@ def _alternatives_ruled_out(
     out = {}
     cat = problem.catalogue
     for other in group:
+        if {name, other} == bias_or_tilt.BIAS_OR_TILT and bias_or_tilt.told_apart(
+            problem, best.values
+        ):
+            out[other] = (
+                "both fitted, and the logged acceleration's mean departs from the velocity's "
+                "change by the bias's share alone: the lean is a force, the bias the sensor's"
+            )
+            continue
         if other in best.values:
             continue
         if {name, other} == bias_or_tilt.BIAS_OR_TILT:

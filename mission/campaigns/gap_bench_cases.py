@@ -264,6 +264,28 @@ def _hard_cases(drag: list[float]) -> list[Case]:
             },
             nominal=(),
         ),
+        # rho 2.8, where the thesis's cut-off rule alone put the cut-off 0.3 mm above the
+        # singularity (29 times a rotor's thrust below it: the take-off catapulted the vehicle
+        # and two rows of 18.7 and 2.8 N made the residual's noise read 84 mN), with a wind
+        Case(
+            "ground_effect_wind",
+            ({"name": "ground_effect", "rho": 2.8}, {"name": "wind", "mean_m_s": [-0.9, 0.6, 0.0]}),
+            {"ground_effect": {"rho": 2.8}, "wind": {"wx": -0.9, "wy": 0.6}},
+            nominal=(DRAG,),
+        ),
+        # an accelerometer bias beside a leaning thrust: at one heading the residual hardly
+        # tells them apart, the logged acceleration's departure from the velocity does
+        Case(
+            "bias_and_tilt",
+            (
+                {"name": "sensor_bias", "accel_bias_m_s2": [-0.3, 0.2, 0.1]},
+                {"name": "thrust_tilt", "lean_deg": [1.0, -1.0]},
+            ),
+            {
+                "sensor_bias": {"bx": -0.3, "by": 0.2, "bz": 0.1},
+                "thrust_tilt": {"ax": 1.0, "ay": -1.0},
+            },
+        ),
         # the real ground effect has another shape than the nominal thesis law (rho 1), which
         # it replaces: as strong at rest (53% of a rotor's thrust; less and the autopilot,
         # subtracting the law's 53%, never leaves the ground), 30% at 4 cm (the law: 9%), 8%

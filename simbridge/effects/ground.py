@@ -4,7 +4,8 @@
 
 z is the rotor's height above the surface actually below it (a ray in the simulator), held at
 the cut-off height below it: the smallest two-decimal value above the singular point
-z* = R sqrt(rho) / 4 (thesis section 3.3.1; 0.02 m for rho = 1 and 2).
+z* = R sqrt(rho) / 4 (thesis section 3.3.1; 0.02 m for rho = 1 and 2), a centimetre higher
+where the gain at that height would exceed tenfold (`cutoff_height_m`).
 """
 
 from __future__ import annotations
@@ -23,9 +24,24 @@ def singular_height_m(rho: float, rotor_radius_m: float) -> float:
     return rotor_radius_m * math.sqrt(rho) / 4.0
 
 
+# The largest thrust gain the cut-off rule allows (f_ge / f_rotor at and below the cut-off).
+MAX_CUTOFF_GAIN = 10.0
+
+
 def cutoff_height_m(rho: float, rotor_radius_m: float) -> float:
-    """The smallest two-decimal height strictly above the singular point."""
-    return (math.floor(singular_height_m(rho, rotor_radius_m) * 100.0 + 1e-9) + 1.0) / 100.0
+    """The smallest two-decimal height strictly above the singular point (the thesis's rule),
+    and a centimetre higher where the gain there would exceed MAX_CUTOFF_GAIN.
+
+    The thesis used rho 1 and 2 (gains 0.53 and 2.2 at its 0.02 m on the nano). Applied
+    beyond them the rule can land just above the singularity: at rho 2.8 the nano's cut-off
+    0.02 m is 0.3 mm above it and a rotor near the ground would lift 29 times its thrust
+    (140 times at rho 2.88), which no rotor does; such rho take the next centimetre."""
+    singular = singular_height_m(rho, rotor_radius_m)
+    cutoff = (math.floor(singular * 100.0 + 1e-9) + 1.0) / 100.0
+    r = rotor_radius_m / (4.0 * cutoff)
+    if 1.0 / (1.0 - rho * r * r) - 1.0 > MAX_CUTOFF_GAIN:
+        cutoff = round(cutoff + 0.01, 2)
+    return cutoff
 
 
 def resolve_cutoff_m(rho: float, cutoff_m: float | None, rotor_radius_m: float) -> float:
