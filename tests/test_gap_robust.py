@@ -417,3 +417,27 @@ def test_a_fit_of_row_wise_effects_on_the_scored_rows_alone_gives_the_same_answe
     assert thinned.values["ground_effect"][0] == pytest.approx(2.0, rel=0.05)
     # a lag needs every row: not thinned
     assert problem.scored((*names, "motor_lag"))[0] is problem
+
+
+def test_a_member_a_later_one_made_redundant_leaves_the_set(tmp_path: Path) -> None:
+    """Forward selection alone keeps what it chose first: a sensor latency standing in for a
+    motor lag fell to 0.2 us once the lag (and a coasting rotor) joined, and stayed 'present'
+    (a blind case's crashed flights). A member below the size the rule admits leaves when
+    the set fits as well without it; one of its size stays."""
+    from learner.gap.fit import MIN_SIZE, effect_size, fit, problem_for
+    from learner.gap.search import _prune
+
+    world = world_file(tmp_path / "world.yaml")
+    w = load_world(world)
+    true = {"rotor_drag": np.array([8e-5, 3e-5])}  # and no wind
+    logs = [synthetic_log(f"f{s}", NANO, world, true, s, seconds=8.0) for s in (0, 1)]
+    problem = problem_for([prepare(log, w, NANO) for log in logs], nominal_values(w.effects), NANO)
+    both = fit(problem, ("wind", "rotor_drag"))
+    still = both.values["wind"]
+    assert effect_size("wind", still, problem.nominal, problem.catalogue) < MIN_SIZE
+    trail: list[dict] = []
+    kept = _prune(problem, both, trail)
+    assert kept.names == ("rotor_drag",)
+    assert kept.values["rotor_drag"] == pytest.approx(true["rotor_drag"], rel=0.05)
+    assert trail[-1]["removed"] == "wind" and kept.bic <= both.bic
+    assert _prune(problem, kept, trail) is kept

@@ -14,7 +14,7 @@ from learner.flightlogs.flightlog import FlightLog
 from learner.gap.geometry import distance_above_m, height_below_m, wall_distances_m
 from simbridge import frames
 from simbridge.effects.proximity import WallEffectParams
-from simbridge.vehicle import Vehicle
+from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 from simbridge.world import World
 
 # Rows further apart than this many control periods start a new segment (airborne spells).
@@ -140,6 +140,35 @@ def touching(log: FlightLog, world: World, vehicle: Vehicle) -> np.ndarray:
     return out
 
 
+# A specific force beyond this many times the rotors' full thrust per mass is an impact (a
+# crash, a hard landing): no force of the air reaches it (the nano's rotors give 3.4
+# weights; the gap bench's strongest ground effect takes a flight to 1.3 times that).
+IMPACT_THRUSTS = 3.0
+IMPACT_GUARD_ROWS = 2  # either side of an impact: differentiation and smoothing spread it
+
+
+def crashing(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
+    """Rows of a crash: the body upside down (its z axis below the horizon: no multirotor
+    flies so), or an impact (a specific force beyond IMPACT_THRUSTS times the rotors' full
+    thrust per mass, with IMPACT_GUARD_ROWS either side). A flight that ends in a crash is
+    diagnosed on its flight: one impact's rows (53 N on a 56 g vehicle) would outweigh the
+    rest in every fit and leave each candidate explaining nothing."""
+    rows = len(log.time_s)
+    x, y = log.quaternion[:, 1], log.quaternion[:, 2]
+    out = 1.0 - 2.0 * (x * x + y * y) < 0.0  # R[2, 2]: body z against world z
+    if rows < 2:
+        return out
+    a = log.acceleration_m_s2
+    if a is None:
+        a = np.gradient(log.velocity_m_s, log.time_s, axis=0)
+    full_thrust = 4.0 * vehicle.thrust_coefficient_n_s2 * vehicle.max_rotor_speed_rad_s**2
+    limit = IMPACT_THRUSTS * full_thrust / vehicle.mass_kg
+    impact = np.flatnonzero(np.linalg.norm(a + np.array([0.0, 0.0, GRAVITY_M_S2]), axis=1) > limit)
+    for k in range(-IMPACT_GUARD_ROWS, IMPACT_GUARD_ROWS + 1):
+        out[np.clip(impact + k, 0, rows - 1)] = True
+    return out
+
+
 def short_stretches(t: np.ndarray, dt_s: float) -> np.ndarray:
     """Rows of airborne stretches shorter than MIN_STRETCH_S (or than the acceleration's
     smoothing window, at low rates): left out."""
@@ -171,8 +200,9 @@ def leave_out(log: FlightLog, world: World, vehicle: Vehicle) -> tuple[FlightLog
     rows = len(log.time_s)
     dt = float(np.median(np.diff(log.time_s))) if rows > 1 else 0.0
     contact = touching(log, world, vehicle)
-    if contact.any():  # the rows around them start new segments (time gaps)
-        log = without_rows(log, contact)
+    crash = crashing(log, vehicle) & ~contact
+    if contact.any() or crash.any():  # the rows around them start new segments (time gaps)
+        log = without_rows(log, contact | crash)
     short = short_stretches(log.time_s, dt) if dt > 0 else np.zeros(len(log.time_s), bool)
     if short.any():
         starts = np.concatenate([[True], np.diff(log.time_s) > GAP_PERIODS * dt])
@@ -183,6 +213,7 @@ def leave_out(log: FlightLog, world: World, vehicle: Vehicle) -> tuple[FlightLog
     counts = {
         "rows": rows,
         "contact_rows": int(contact.sum()),
+        "crash_rows": int(crash.sum()),
         "short_stretches": stretches,
         "short_rows": int(short.sum()),
         "min_stretch_s": MIN_STRETCH_S,
@@ -204,6 +235,11 @@ def describe_left_out(counts: dict) -> str:
             f"{counts['contact_rows']} rows in contact with a surface (the body within "
             f"{CONTACT_BELOW_M * 1000:g} mm of the surface below it or "
             f"{CONTACT_MARGIN_M * 1000:g} mm of a wall or the ceiling)"
+        )
+    if counts.get("crash_rows"):
+        parts.append(
+            f"{counts['crash_rows']} rows of a crash (the body upside down, or an impact: a "
+            f"specific force beyond {IMPACT_THRUSTS:g} times the rotors' full thrust)"
         )
     return "left out: " + (", ".join(parts) if parts else "nothing")
 
