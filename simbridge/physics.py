@@ -95,6 +95,9 @@ class Simulation:
         self._ge_force, self._ce_force = _zero3(), _zero3()
         self._wall_force, self._drag_force, self._wind = _zero3(), _zero3(), _zero3()
         self._acceleration: Vec3 = (0.0, 0.0, 0.0)
+        # the body's velocities after the last step: only stepping changes them, so they are
+        # the next step's start and what `state` reports (None: read them from PyBullet)
+        self._velocity_end: tuple[Vec3, Vec3] | None = None
 
     # -- construction -------------------------------------------------------------------
 
@@ -146,7 +149,8 @@ class Simulation:
             self._acceleration = (0.0, 0.0, 0.0)
             return
         cid, body = self._cid, self._body
-        v0, _ = pb.getBaseVelocity(body, physicsClientId=cid)
+        end = self._velocity_end
+        v0 = end[0] if end is not None else pb.getBaseVelocity(body, physicsClientId=cid)[0]
         rotors = self._rotors
         constant = rotors.constant
         # the thrust decay's clock, the same over the step's physics steps (a lift-off found
@@ -160,7 +164,8 @@ class Simulation:
                 f = rotors.forces(rotors.advance(rotor_commands_rad_s), since)
                 tm = thrust_and_moments(f, self._arm, self._kz)
             self._substep(f, tm)
-        v1, _ = pb.getBaseVelocity(body, physicsClientId=cid)
+        self._velocity_end = pb.getBaseVelocity(body, physicsClientId=cid)
+        v1 = self._velocity_end[0]
         inv = 1.0 / world.control_period_s
         self._acceleration = ((v1[0] - v0[0]) * inv, (v1[1] - v0[1]) * inv, (v1[2] - v0[2]) * inv)
         self._time_us += world.control_period_us
@@ -400,7 +405,8 @@ class Simulation:
     def state(self) -> VehicleState:
         cid, body = self._cid, self._body
         pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
-        vel, omega = pb.getBaseVelocity(body, physicsClientId=cid)
+        end = self._velocity_end
+        vel, omega = end if end is not None else pb.getBaseVelocity(body, physicsClientId=cid)
         m = pb.getMatrixFromQuaternion(orn)
         omega_body = (
             m[0] * omega[0] + m[3] * omega[1] + m[6] * omega[2],
