@@ -96,6 +96,8 @@ def fly(
         path = default_recording_path(mission_path, model) if record is True else record
         options += ["--record", str(path), "--record-world", str(resolve_world_path(world))]
         options += ["--record-mission", str(mission_path)]
+    if "--vehicle" not in autopilot_options:  # the autopilot flies the world's vehicle
+        options += ["--vehicle", world_obj.vehicle]
     options += autopilot_options  # e.g. the experiments' --online METHOD
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None

@@ -91,6 +91,26 @@ def test_fly_json_reports_the_figures():
     assert summary["sim_s"] > 15 and summary["rtf"] > 0
 
 
+def test_fly_gives_the_autopilot_the_worlds_vehicle(tmp_path):
+    """A world naming another vehicle flies it on both sides: the autopilot once took the nano
+    for a Crazyflie's world and never finished a mission (mass, C_T and rotor speeds its
+    own); its flight log named the nano."""
+    import yaml
+
+    from learner.flightlogs.readers import read_log
+
+    world = tmp_path / "cf.yaml"
+    world.write_text(
+        yaml.safe_dump({"vehicle": "crazyflie2", "effects": [{"name": "ground_effect"}]})
+    )
+    summary = fly(EXAMPLES / "low_hover.yaml", world=str(world), via_gcs=False, record=False,
+                  flight_log=tmp_path / "flight.csv")  # fmt: skip
+    assert summary["landed"] and summary["landing_error_m"] < 0.02
+    assert summary["hold_z_rms_error_m"] < 0.005
+    log = read_log(tmp_path / "flight.csv")
+    assert log.meta["vehicle"] == "crazyflie2"
+
+
 def test_a_killed_simulator_ends_the_autopilot_within_a_second_with_its_log(tmp_path):
     sim, port = start_sim("default", speedup="1")
     trajectory = tmp_path / "t.npz"
