@@ -16,7 +16,7 @@ from mission.gcs_client import GroundStation, GroundStationError, VehicleEnded
 from mission.plans.formats import load_mission_file
 from mission.recordings import default_recording_path
 from simbridge.config import ConfigError
-from simbridge.launch import finish, spawn_local_sim
+from simbridge.launch import finish, spawn_local_sim, vehicle_options
 from simbridge.world import load_world, resolve_world_path
 
 
@@ -96,8 +96,7 @@ def fly(
         path = default_recording_path(mission_path, model) if record is True else record
         options += ["--record", str(path), "--record-world", str(resolve_world_path(world))]
         options += ["--record-mission", str(mission_path)]
-    if "--vehicle" not in autopilot_options:  # the autopilot flies the world's vehicle
-        options += ["--vehicle", world_obj.vehicle]
+    options += vehicle_options(world_obj.vehicle, autopilot_options)
     options += autopilot_options  # e.g. the experiments' --online METHOD
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None

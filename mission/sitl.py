@@ -15,7 +15,7 @@ from pathlib import Path
 import yaml
 
 from simbridge.config import ConfigError
-from simbridge.launch import start_sim, supervised_options
+from simbridge.launch import start_sim, supervised_options, vehicle_options
 from simbridge.world import load_world, resolve_world_path
 
 STOP_WAIT_S = 5.0  # for each process to end on its signal before it is killed
@@ -69,7 +69,9 @@ def run_sitl(
         world_path = (
             located_world(world, location, Path(tmp)) if location else resolve_world_path(world)
         )
-        o = load_world(world_path).origin
+        world_obj = load_world(world_path)
+        o = world_obj.origin
+        vehicle = vehicle_options(world_obj.vehicle, autopilot_options)
         sim, port = start_sim(
             world_path, speedup=speedup, extra=["--wait", *sim_options], supervised=True
         )
@@ -79,6 +81,7 @@ def run_sitl(
             "--origin", f"{o.lat_deg},{o.lon_deg},{o.alt_m}",
             *[a for url in gcs_urls for a in ("--out", url)],
             "--record-world", str(world_path),  # ignored when not recording
+            *vehicle,
             *autopilot_options,
         ]  # fmt: skip
         autopilot = subprocess.Popen(cmd, **supervised_options())

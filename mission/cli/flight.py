@@ -75,7 +75,10 @@ def add_sitl_parser(sub: Any) -> None:
     )
     model_options(p, rho_default=None, model_default=None)
     gcs_options(p)
-    p.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
+    p.add_argument(
+        "--vehicle",
+        help="the autopilot's vehicle YAML or packaged name (default: the world's, as the sim's)",
+    )
     add_sensor_options(p)
     add_record_options(p)
     p.set_defaults(func=cmd_sitl)
@@ -129,7 +132,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
 
     location = parse_location(args.location) if args.location else None
     options = ["--identity", args.identity, "--params-file", str(args.params_file)]
-    options += ["--vehicle", args.vehicle]
+    if args.vehicle is not None:
+        options += ["--vehicle", args.vehicle]
     sim_options, sensor_params = sensor_arguments(args)
     options += sensor_params + [a for p in args.param for a in ("--param", p)]
     if args.model is not None:
