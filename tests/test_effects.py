@@ -42,13 +42,17 @@ def test_cutoff_is_the_smallest_two_decimal_height_above_the_singularity(rho, cu
 
 
 @pytest.mark.parametrize("rho", [2.5, 2.7, 2.8, 2.88, 5.9, 6.0, 12.0])
-def test_cutoff_never_multiplies_a_rotors_thrust_more_than_tenfold(rho):
+@pytest.mark.parametrize("radius", [R, 0.1524])  # the nano's, a 12-inch propeller's
+@pytest.mark.parametrize("rho_scale", [1.0, 4.0])
+def test_cutoff_never_multiplies_a_rotors_thrust_more_than_tenfold(rho, radius, rho_scale):
     """Just above the singularity the thesis's rule would (29 times at rho 2.8): such rho
     take the next centimetre, where the gain is modest."""
-    cut = cutoff_height_m(rho, R)
-    gain = equation_3_4(1000.0, cut, rho) / (C_T * 1000.0**2)
+    rho = min(rho * rho_scale, 50.0)
+    cut = cutoff_height_m(rho, radius)
+    r = radius / (4.0 * cut)
+    gain = 1.0 / (1.0 - rho * r * r) - 1.0
     assert 0.0 < gain <= MAX_CUTOFF_GAIN
-    assert cut > singular_height_m(rho, R)
+    assert cut > singular_height_m(rho, radius)
     assert round(cut * 100) == pytest.approx(cut * 100)  # whole centimetres still
 
 

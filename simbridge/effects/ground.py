@@ -30,16 +30,17 @@ MAX_CUTOFF_GAIN = 10.0
 
 def cutoff_height_m(rho: float, rotor_radius_m: float) -> float:
     """The smallest two-decimal height strictly above the singular point (the thesis's rule),
-    and a centimetre higher where the gain there would exceed MAX_CUTOFF_GAIN.
+        and a centimetre higher where the gain there would exceed MAX_CUTOFF_GAIN.
 
-    The thesis used rho 1 and 2 (gains 0.53 and 2.2 at its 0.02 m on the nano). Applied
-    beyond them the rule can land just above the singularity: at rho 2.8 the nano's cut-off
-    0.02 m is 0.3 mm above it and a rotor near the ground would lift 29 times its thrust
-    (140 times at rho 2.88), which no rotor does; such rho take the next centimetre."""
+        The thesis used rho 1 and 2 (gains 0.53 and 2.2 at its 0.02 m on the nano). Applied
+        beyond them the rule can land just above the singularity: at rho 2.8 the nano's cut-off
+        0.02 m is 0.3 mm above it and a rotor near the ground would lift 29 times its thrust
+        (140 times at rho 2.88), which no rotor does; such rho take the next centimetre (or the
+    next that brings the gain within bounds)."""
     singular = singular_height_m(rho, rotor_radius_m)
     cutoff = (math.floor(singular * 100.0 + 1e-9) + 1.0) / 100.0
-    r = rotor_radius_m / (4.0 * cutoff)
-    if 1.0 / (1.0 - rho * r * r) - 1.0 > MAX_CUTOFF_GAIN:
+    # a large rotor's singular height is tens of cm, where a centimetre may not be enough
+    while 1.0 / (1.0 - rho * (rotor_radius_m / (4.0 * cutoff)) ** 2) - 1.0 > MAX_CUTOFF_GAIN:
         cutoff = round(cutoff + 0.01, 2)
     return cutoff
 
