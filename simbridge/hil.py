@@ -22,8 +22,9 @@ from dataclasses import dataclass
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from simbridge.effects.sensor_errors import add, delay_steps
+from simbridge.effects.sensor_errors import add, delay_periods, delay_steps
 from simbridge.frames import (
+    Vec3,
     enu_to_ned,
     flu_to_frd,
     local_to_geodetic,
@@ -48,6 +49,20 @@ ARMED_MODE = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 UNKNOWN_COVARIANCE = [math.nan] + [0.0] * 20
 RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
 TRUTH_NAME = b"GE_TRUE"  # DEBUG_VECT carrying the true ground-effect force
+
+
+def _imu_sample(s: VehicleState, m: Sequence[float]) -> tuple[Vec3, Vec3]:
+    """The specific force (body FLU, m/s^2) and body rates an ideal IMU reads in state `s`
+    (`m` its rotation matrix, row-major)."""
+    a = s.acceleration_m_s2
+    return rotate_transposed(m, (a[0], a[1], a[2] + GRAVITY_M_S2)), s.angular_velocity_body_rad_s
+
+
+def _blend(new: Vec3, old: Vec3, fraction: float) -> Vec3:
+    """`fraction` of the way from `new` to `old`."""
+    k = 1.0 - fraction
+    return (k * new[0] + fraction * old[0], k * new[1] + fraction * old[1],
+            k * new[2] + fraction * old[2])  # fmt: skip
 
 
 def pressure_hpa(altitude_amsl_m: float) -> float:
@@ -113,8 +128,11 @@ class HilEncoder:
         self._pack_altitude = packer(mavlink.MAVLink_altitude_message)
         fx = world.effects
         period = world.control_period_s
-        self._imu_delay = (
-            delay_steps(fx.sensor_latency.imu_delay_s, period) if fx.sensor_latency else 0
+        # the IMU's delay in whole periods and the fraction of one beyond: its sample is then
+        # interpolated between the two neighbouring ones (a 10 ms delay at 250 Hz is 10 ms,
+        # not the 8 ms that rounding to periods made of it)
+        self._imu_delay, self._imu_fraction = (
+            delay_periods(fx.sensor_latency.imu_delay_s, period) if fx.sensor_latency else (0, 0.0)
         )
         self._state_delay = (
             delay_steps(fx.sensor_latency.state_delay_s, period) if fx.sensor_latency else 0
@@ -124,7 +142,7 @@ class HilEncoder:
         # the motion-capture pose comes later than the state (the capture system's latency)
         self._mocap_delay = self._state_delay + delay_steps(noise.mocap_latency_s, period)
         self._history: deque[VehicleState] = deque(
-            maxlen=max(self._imu_delay, self._mocap_delay) + 1
+            maxlen=max(self._imu_delay + (self._imu_fraction > 0.0), self._mocap_delay) + 1
         )
         bias = fx.sensor_bias
         zero = (0.0, 0.0, 0.0)
@@ -174,6 +192,7 @@ class HilEncoder:
         self._history.append(state)
         hist = self._history
         self._imu_state = hist[max(0, len(hist) - 1 - self._imu_delay)]
+        self._imu_older = hist[max(0, len(hist) - 2 - self._imu_delay)]
         self._nav_state = hist[max(0, len(hist) - 1 - self._state_delay)]
         self._mocap_state = hist[max(0, len(hist) - 1 - self._mocap_delay)]
         self._truth_due = self._due("truth")
@@ -227,13 +246,16 @@ class HilEncoder:
 
     def _hil_sensor(self, s: VehicleState, time_us: int) -> bytes:
         m = quat_to_matrix(s.quaternion)
-        a = s.acceleration_m_s2
-        specific_force = add(
-            rotate_transposed(m, (a[0], a[1], a[2] + GRAVITY_M_S2)), self._accel_bias
-        )
+        specific_force, rates = _imu_sample(s, m)
+        f = self._imu_fraction
+        if f > 0.0:  # a fraction of a period further back: towards the older sample
+            old = self._imu_older
+            old_force, old_rates = _imu_sample(old, quat_to_matrix(old.quaternion))
+            specific_force = _blend(specific_force, old_force, f)
+            rates = _blend(rates, old_rates, f)
         errors = self._errors
         specific_force, rates = errors.imu(
-            specific_force, add(s.angular_velocity_body_rad_s, self._gyro_bias)
+            add(specific_force, self._accel_bias), add(rates, self._gyro_bias)
         )
         acc = flu_to_frd(specific_force)
         gyro = flu_to_frd(rates)

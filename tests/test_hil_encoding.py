@@ -138,3 +138,17 @@ def test_sensor_latency_reports_older_states():
     assert [alt for alt, _, _ in reported] == [29000, 29000, 29000, 30000, 31000]  # 2 steps late
     assert [g for _, g, _ in reported] == pytest.approx([0.0, 0.0, 0.1, 0.2, 0.3])  # 1 step late
     assert [t for _, _, t in reported] == [0, 4000, 8000, 12000, 16000]  # stamps stay current
+
+
+def test_an_imu_delay_between_control_periods_is_interpolated_not_rounded():
+    """10 ms at 250 Hz is two and a half periods: the gyro reads the rate of 10 ms ago (a
+    ramp, so exactly its value there), where rounding to periods made it 8 ms (a blind case's
+    latency then read 7.7 ms, 23% short of the world file's)."""
+    latency = SensorLatencyParams(imu_delay_s=0.010)
+    encoder = HilEncoder(every_step(with_effects(load_world(), sensor_latency=latency)), VEHICLE)
+    rates = []
+    for k in range(8):
+        s = dataclasses.replace(state(), angular_velocity_body_rad_s=(0.1 * k, 0.0, 0.0))
+        rates.append(decode(encoder.encode(s, 4000 * k))["HIL_SENSOR"][0].xgyro)
+    # the rate at t is 0.1 per 4 ms; at t - 10 ms it is 0.1 (k - 2.5), once the history holds it
+    assert rates[3:] == pytest.approx([0.1 * (k - 2.5) for k in range(3, 8)])

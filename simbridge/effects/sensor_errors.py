@@ -1,11 +1,13 @@
 """Sensor latency and bias, applied to what the HIL link reports (never to the physics).
 
 Latency delays the IMU (HIL_SENSOR) and the state (HIL_STATE_QUATERNION, ODOMETRY, GPS)
-by whole control periods; bias adds constants to accelerometer, gyro and position.
+by whole control periods, the IMU's also by a fraction of one (between two samples); bias
+adds constants to accelerometer, gyro and position.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from simbridge.config import param
@@ -22,6 +24,15 @@ class SensorLatencyParams:
 def delay_steps(delay_s: float, control_period_s: float) -> int:
     """A delay as a whole number of control periods (rounded to the nearest)."""
     return round(delay_s / control_period_s)
+
+
+def delay_periods(delay_s: float, control_period_s: float) -> tuple[int, float]:
+    """A delay as whole control periods and the fraction of one beyond them (0 for a whole
+    number of periods, to the nanosecond)."""
+    periods = delay_s / control_period_s
+    whole = math.floor(periods + 1e-9)
+    fraction = periods - whole
+    return whole, (fraction if fraction > 1e-9 else 0.0)
 
 
 @dataclass(frozen=True)
