@@ -246,3 +246,30 @@ def test_the_residual_noise_is_the_noise_with_a_few_rows_of_a_catapulting_force(
     spiked[0, 2], spiked[1, 2], spiked[4000, 2] = 18.7, 2.8, 0.3
     assert np.sqrt(np.var(spiked)) > 0.05  # the plain variance: ten times the noise
     assert np.sqrt(trimmed_variance(spiked)) == pytest.approx(0.0056, rel=0.03)
+
+
+def test_a_model_force_is_filtered_as_a_differentiated_acceleration_is() -> None:
+    """Without an accelerometer the log's acceleration is its velocity's Savitzky-Golay
+    derivative; the model's force goes through the same (summed into a velocity, then that
+    derivative): a steady or ramping force unchanged, a step smoothed exactly as the log's
+    acceleration is. Unfiltered, the smoothing was fitted as a motor lag (8.5 ms) and a
+    flatter thrust curve (0.95) in worlds with neither."""
+    import dataclasses
+
+    from learner.gap.flightdata import as_differentiated, differentiate
+
+    n, dt = 400, 0.01
+    t = np.arange(n) * dt
+    segment = np.zeros(n, dtype=int)
+    d = dataclasses.make_dataclass("D", ["time_s", "segment", "dt_s"])(t, segment, dt)
+    ramp = np.column_stack([0.3 + 0.5 * t, np.zeros(n), np.ones(n)])
+    inner = slice(10, n - 10)  # the derivative's edges are one-sided
+    # each row's force is its period's mean: the derivative at the row's time reads the force
+    # there, half a period on
+    expected = ramp[inner] + [0.5 * dt / 2, 0.0, 0.0]
+    np.testing.assert_allclose(as_differentiated(ramp, d)[inner], expected, atol=1e-9)
+    step = np.zeros((n, 3))
+    step[200:, 2] = 1.0
+    velocity = np.cumsum(step * dt, axis=0)  # what a log's velocity would hold
+    np.testing.assert_allclose(as_differentiated(step, d), differentiate(t, velocity, segment, dt))
+    assert 0.0 < as_differentiated(step, d)[199, 2] < 1.0  # smoothed across the step

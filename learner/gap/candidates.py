@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from learner.gap.flightdata import FlightData
+from learner.gap.flightdata import FlightData, as_differentiated
 from learner.gap.rotor_forces import Values, rotor_forces_n
 from simbridge.effects import EffectSet
 from simbridge.effects.actuators import thrust_axis_body
@@ -379,6 +379,8 @@ def world_force(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
         force = np.einsum("nij,nj->ni", d.rotation, late)
     if "sensor_bias" in values:
         force += vehicle.mass_kg * np.einsum("nij,j->ni", d.rotation, values["sensor_bias"])
+    if not d.measured_acceleration:  # filtered as the log's acceleration was
+        force = as_differentiated(force, d)
     return force
 
 

@@ -69,7 +69,10 @@ class Problem:
         every STRIDE-th row; computed on those rows only when no effect needs the rows
         between them (HISTORY), the same figures for half the work."""
         every = [slice(None, None, STRIDE)] * len(self.flights)
-        if any(h in names or h in self.nominal for h in HISTORY):
+        # a differentiated acceleration's filter needs the rows between too
+        if any(h in names or h in self.nominal for h in HISTORY) or not all(
+            d.measured_acceleration for d in self.flights
+        ):
             return self, every
         if self._thinned is None:
             self._thinned = Problem(
