@@ -192,7 +192,6 @@ class HilEncoder:
         self._history.append(state)
         hist = self._history
         self._imu_state = hist[max(0, len(hist) - 1 - self._imu_delay)]
-        self._imu_older = hist[max(0, len(hist) - 2 - self._imu_delay)]
         self._nav_state = hist[max(0, len(hist) - 1 - self._state_delay)]
         self._mocap_state = hist[max(0, len(hist) - 1 - self._mocap_delay)]
         self._truth_due = self._due("truth")
@@ -249,7 +248,8 @@ class HilEncoder:
         specific_force, rates = _imu_sample(s, m)
         f = self._imu_fraction
         if f > 0.0:  # a fraction of a period further back: towards the older sample
-            old = self._imu_older
+            hist = self._history
+            old = hist[max(0, len(hist) - 2 - self._imu_delay)]
             old_force, old_rates = _imu_sample(old, quat_to_matrix(old.quaternion))
             specific_force = _blend(specific_force, old_force, f)
             rates = _blend(rates, old_rates, f)

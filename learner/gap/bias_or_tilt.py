@@ -91,9 +91,15 @@ def told_apart(problem: Problem, values: Values) -> bool:
     logged = logged_offset_m_s2(problem.flights)
     if logged is None:
         return False
-    rest = {k: v for k, v in values.items() if k != "sensor_bias"}
-    bias = [a - b for a, b in zip(problem.predicted(values), problem.predicted(rest), strict=True)]
-    return measured_bias(member_offset_m_s2(np.concatenate(bias), problem.vehicle.mass_kg), logged)
+    return measured_bias(fitted_offset_m_s2(problem, values, "sensor_bias"), logged)
+
+
+def fitted_offset_m_s2(problem: Problem, values: Values, name: str) -> np.ndarray:
+    """The mean world-frame acceleration the member `name` of the fitted `values` puts in
+    the residual: the prediction with it less the one without it."""
+    rest = {k: v for k, v in values.items() if k != name}
+    part = [a - b for a, b in zip(problem.predicted(values), problem.predicted(rest), strict=True)]
+    return member_offset_m_s2(np.concatenate(part), problem.vehicle.mass_kg)
 
 
 def contradicted(name: str, contribution_n: np.ndarray, logged: np.ndarray | None,

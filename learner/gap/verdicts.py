@@ -203,10 +203,7 @@ def _bias_or_tilt(problem: gapfit.Problem, best: gapfit.Fit, name: str, other: s
     logged = bias_or_tilt.logged_offset_m_s2(problem.flights)
     if logged is None:
         return None
-    rest = {k: v for k, v in best.values.items() if k != name}
-    parts = [a - b for a, b in zip(problem.predicted(best.values), problem.predicted(rest),
-                                   strict=True)]  # fmt: skip
-    member = bias_or_tilt.member_offset_m_s2(np.concatenate(parts), problem.vehicle.mass_kg)
+    member = bias_or_tilt.fitted_offset_m_s2(problem, best.values, name)
     return bias_or_tilt.ruled_out(other, member, logged)
 
 
