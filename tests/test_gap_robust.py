@@ -199,6 +199,48 @@ def test_short_stretches_and_contact_with_any_surface_are_left_out_and_counted(
     assert summary in (out / "report.md").read_text()
 
 
+def test_standing_with_the_rotors_stopped_is_left_out_even_where_the_heights_miss_the_ground(
+    tmp_path: Path,
+) -> None:
+    """A PX4 log's disarmed minutes before take-off, in a local frame that does not put the
+    ground at zero (pyulog's sample logs): 20 s standing still 0.5 m 'above the ground' with
+    the rotors stopped, then the flight. Those rows carry a full weight of residual; before,
+    the run stopped as 'implausible for a flying vehicle'. A rotor cut in the air (0.3 s of
+    free fall, rotors stopped) is kept: it falls, nothing holds it."""
+    world = world_file(tmp_path / "world.yaml")
+    logs = []
+    for seed in (0, 1):
+        log = synthetic_log(f"f{seed}", NANO, world, {}, seed, seconds=10.0)
+        k, j = 2000, 30  # standing rows, then free-fall rows
+        t0 = log.time_s[0] - DT_S * (k + j)
+        t = t0 + DT_S * np.arange(k + j)
+        p = np.tile([0.0, 0.0, 0.5], (k + j, 1))
+        v, a = np.zeros((k + j, 3)), np.zeros((k + j, 3))
+        tf = DT_S * np.arange(j)
+        p[k:, 2] = 1.5 - 0.5 * GRAVITY_M_S2 * tf**2
+        v[k:, 2], a[k:, 2] = -GRAVITY_M_S2 * tf, -GRAVITY_M_S2
+        level = np.tile([1.0, 0.0, 0.0, 0.0], (k + j, 1))
+        log = FlightLog(
+            log.name, np.concatenate([t, log.time_s]), np.vstack([p, log.position_m]),
+            np.vstack([v, log.velocity_m_s]), np.vstack([level, log.quaternion]),
+            np.zeros((k + j + len(log.time_s), 3)),
+            np.vstack([np.zeros((k + j, 4)), log.rotor_speeds_rad_s]),
+            np.vstack([a, log.acceleration_m_s2]),
+        )  # fmt: skip
+        d = prepare(log, load_world(world), NANO)
+        assert d.left_out["held_rows"] == k
+        assert d.left_out["contact_rows"] == 0 and d.left_out["crash_rows"] == 0
+        assert len(d.time_s) == len(log.time_s) - k  # the free fall and the flight kept
+        logs.append(write_log(log, tmp_path / f"f{seed}.csv"))
+    out = tmp_path / "out"
+    run_diagnosis(logs, [], str(world), out, folds=2, replay=False, candidates=FEW)
+    figures = json.loads((out / "gap.json").read_text())
+    assert figures["left_out"]["held_rows"] == 2 * 2000
+    assert "4000 rows standing with the rotors stopped" in figures["left_out"]["summary"]
+    present = [e for e, r in figures["effects"].items() if r["status"] == "present"]
+    assert present == []  # the nominal world flew: nothing to name
+
+
 # 2. a replay the corrected world cannot fly --------------------------------------------------
 
 

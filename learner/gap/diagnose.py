@@ -65,9 +65,9 @@ def _problem(flights: list[FlightData], nominal: Values, vehicle: Vehicle) -> ga
 
 
 def left_out_counts(flights: list[FlightData]) -> dict[str, Any]:
-    """Rows left out of every flight (contact, crashes, short stretches), summed and per
+    """Rows left out of every flight (contact, crashes, standing, short stretches), summed and per
     flight."""
-    keys = ("rows", "contact_rows", "crash_rows", "short_stretches", "short_rows")
+    keys = ("rows", "contact_rows", "crash_rows", "held_rows", "short_stretches", "short_rows")
     total: dict[str, Any] = {k: sum(d.left_out.get(k, 0) for d in flights) for k in keys}
     total["min_stretch_s"] = flights[0].left_out.get("min_stretch_s") if flights else None
     total["per_flight"] = {d.name: d.left_out for d in flights}

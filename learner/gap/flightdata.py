@@ -184,9 +184,46 @@ def crashing(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
     return out
 
 
+# Rotors stopped (their nominal thrust below this share of the weight) and the body at rest
+# (speed and kinematic acceleration below these) for at least HELD_S: something holds it up
+# (the ground under a log whose heights are off, a stand, a hand). A rotor coasting in the
+# air after a cut leaves the body falling within a fraction of this time.
+HELD_THRUST_SHARE = 0.05
+HELD_SPEED_M_S = 0.1
+HELD_ACCELERATION_M_S2 = 0.25 * GRAVITY_M_S2
+HELD_S = 0.5
+
+
+def held_up(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
+    """Rows standing with the rotors stopped: no aerodynamic effect acts there, and their
+    full-weight residual would swamp every fit (a disarmed stretch of a PX4 log whose local
+    frame does not put the ground at zero)."""
+    rows = len(log.time_s)
+    if rows < 2:
+        return np.zeros(rows, bool)
+    thrust_n = vehicle.thrust_coefficient_n_s2 * np.sum(log.rotor_speeds_rad_s**2, axis=1)
+    a = log.acceleration_m_s2
+    if a is None:
+        a = np.gradient(log.velocity_m_s, log.time_s, axis=0)
+    candidate = (
+        (thrust_n < HELD_THRUST_SHARE * vehicle.mass_kg * GRAVITY_M_S2)
+        & (np.linalg.norm(log.velocity_m_s, axis=1) < HELD_SPEED_M_S)
+        & (np.linalg.norm(a, axis=1) < HELD_ACCELERATION_M_S2)
+    )
+    # runs of candidate rows lasting HELD_S
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], candidate.astype(int), [0]])))
+    out = np.zeros(rows, bool)
+    for start, end in zip(edges[::2], edges[1::2], strict=True):
+        if log.time_s[end - 1] - log.time_s[start] >= HELD_S:
+            out[start:end] = True
+    return out
+
+
 def short_stretches(t: np.ndarray, dt_s: float) -> np.ndarray:
     """Rows of airborne stretches shorter than MIN_STRETCH_S (or than the acceleration's
     smoothing window, at low rates): left out."""
+    if len(t) == 0:
+        return np.zeros(0, bool)
     new = np.concatenate([[True], np.diff(t) > GAP_PERIODS * dt_s])
     segment = np.cumsum(new) - 1
     sizes = np.bincount(segment)
@@ -215,9 +252,10 @@ def leave_out(log: FlightLog, world: World, vehicle: Vehicle) -> tuple[FlightLog
     rows = len(log.time_s)
     dt = float(np.median(np.diff(log.time_s))) if rows > 1 else 0.0
     contact = touching(log, world, vehicle)
-    crash = crashing(log, vehicle) & ~contact
-    if contact.any() or crash.any():  # the rows around them start new segments (time gaps)
-        log = without_rows(log, contact | crash)
+    held = held_up(log, vehicle) & ~contact
+    crash = crashing(log, vehicle) & ~contact & ~held
+    if contact.any() or crash.any() or held.any():  # the rows around them start new segments
+        log = without_rows(log, contact | crash | held)
     short = short_stretches(log.time_s, dt) if dt > 0 else np.zeros(len(log.time_s), bool)
     if short.any():
         starts = np.concatenate([[True], np.diff(log.time_s) > GAP_PERIODS * dt])
@@ -229,6 +267,7 @@ def leave_out(log: FlightLog, world: World, vehicle: Vehicle) -> tuple[FlightLog
         "rows": rows,
         "contact_rows": int(contact.sum()),
         "crash_rows": int(crash.sum()),
+        "held_rows": int(held.sum()),
         "short_stretches": stretches,
         "short_rows": int(short.sum()),
         "min_stretch_s": MIN_STRETCH_S,
@@ -250,6 +289,12 @@ def describe_left_out(counts: dict) -> str:
             f"{counts['contact_rows']} rows in contact with a surface (the body within "
             f"{CONTACT_BELOW_M * 1000:g} mm of the surface below it or "
             f"{CONTACT_MARGIN_M * 1000:g} mm of a wall or the ceiling)"
+        )
+    if counts.get("held_rows"):
+        parts.append(
+            f"{counts['held_rows']} rows standing with the rotors stopped (their thrust below "
+            f"{HELD_THRUST_SHARE:.0%} of the weight, at rest for {HELD_S:g} s or more: on the "
+            f"ground, or held)"
         )
     if counts.get("crash_rows"):
         parts.append(
