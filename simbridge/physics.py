@@ -45,7 +45,8 @@ class Simulation:
 
     def __init__(self, world: World, vehicle: Vehicle, *, held: bool = False) -> None:
         self.world, self.vehicle = world, vehicle
-        fx = world.effects
+        # drag's coefficients and areas a world leaves out follow the vehicle
+        self.effects = fx = world.effects.for_vehicle(vehicle)
         self._cid = pb.connect(pb.DIRECT)
         self._dt = world.physics_dt_s
         self._time_us = 0
@@ -272,7 +273,7 @@ class Simulation:
             self._apply_learned(force, m, f, heights)
 
     def _apply_drag(self, force: list[float], m: tuple[float, ...], n: list[float]) -> None:
-        fx = self.world.effects
+        fx = self.effects
         vel, _ = pb.getBaseVelocity(self._body, physicsClientId=self._cid)
         wind = wind_velocity_m_s(fx.wind, self.time_s) if fx.wind is not None else (0.0, 0.0, 0.0)
         va = (vel[0] - wind[0], vel[1] - wind[1], vel[2] - wind[2])

@@ -5,6 +5,7 @@ Both the simulator and the autopilot read this; it is the one place for the vehi
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -92,3 +93,9 @@ def resolve_vehicle_path(name_or_path: str | Path) -> Path:
 def load_vehicle(name_or_path: str | Path = "nano") -> Vehicle:
     path = resolve_vehicle_path(name_or_path)
     return build(Vehicle, load_yaml(path), str(path))
+
+
+@functools.lru_cache(maxsize=1)
+def nano_vehicle() -> Vehicle:
+    """The thesis's nano quadrotor: the vehicle the effects' defaults are stated for."""
+    return load_vehicle("nano")

@@ -6,6 +6,7 @@ import math
 
 import pytest
 
+from simbridge.effects import parse_effects
 from simbridge.effects.actuators import motor_lag_step
 from simbridge.effects.drag import (
     BodyDragParams,
@@ -26,6 +27,7 @@ from simbridge.effects.ground import (
 from simbridge.effects.proximity import WallEffectParams, wall_force_n
 from simbridge.effects.sensor_errors import delay_steps
 from simbridge.rotors import rotor_forces_for, rotor_forces_n, rotor_speeds_for, thrust_and_moments
+from simbridge.vehicle import load_vehicle
 
 R = 0.047
 C_T = 2.39e-5
@@ -157,3 +159,35 @@ def test_wall_force_points_to_the_wall_and_decays_with_the_inverse_square():
 def test_sensor_delay_in_control_periods():
     assert delay_steps(0.008, 0.004) == 2
     assert delay_steps(0.0, 0.004) == 0
+
+
+def test_drag_a_world_leaves_out_follows_its_vehicle() -> None:
+    """`{name: rotor_drag}` and `{name: body_drag}` without values: the nano's rotor drag at
+    the same share of the weight per m/s at hover, and the vehicle's own box. Before, every
+    vehicle got the nano's numbers: on a Crazyflie (rotor speeds near 1700 rad/s, not 76) a
+    rotor drag of 45% of its weight per m/s, and the nano's 8 cm body on a 60 cm frame."""
+    effects = parse_effects([{"name": "rotor_drag"}, {"name": "body_drag"}], "effects")
+    shares = {}
+    for name in ("nano", "crazyflie2", "quad_2_7kg"):
+        vehicle = load_vehicle(name)
+        fx = effects.for_vehicle(vehicle)
+        n_sum = 4.0 * vehicle.hover_rotor_speed_rad_s
+        fx_n, _, _ = rotor_drag_n(fx.rotor_drag, n_sum, (1.0, 0.0, 0.0))
+        shares[name] = -fx_n / vehicle.weight_n
+        x, y, z = vehicle.body_size_m
+        assert fx.body_drag.area_m2 == pytest.approx((y * z, x * z, x * y))
+    assert shares["crazyflie2"] == pytest.approx(shares["nano"], rel=1e-9)
+    assert shares["quad_2_7kg"] == pytest.approx(shares["nano"], rel=1e-9)
+    nano = effects.for_vehicle(load_vehicle("nano"))
+    assert nano.rotor_drag.coefficient_n_s_m == (2.2e-5, 2.2e-5, 1.0e-5)  # as before
+    assert nano.body_drag.area_m2 == (0.002016, 0.002016, 0.0064)
+    # the Crazyflie's within a factor of two of what Foerster 2015 identified on one
+    k_cf = effects.for_vehicle(load_vehicle("crazyflie2")).rotor_drag.coefficient_n_s_m[0]
+    assert 0.5 * 9.2e-7 < k_cf < 2.0 * 10.3e-7
+    # values a world gives are kept, whatever the vehicle
+    given = parse_effects(
+        [{"name": "rotor_drag", "coefficient_n_s_m": [1e-6, 2e-6, 3e-6]},
+         {"name": "body_drag", "area_m2": [0.1, 0.2, 0.3]}], "effects",
+    ).for_vehicle(load_vehicle("quad_2_7kg"))  # fmt: skip
+    assert given.rotor_drag.coefficient_n_s_m == (1e-6, 2e-6, 3e-6)
+    assert given.body_drag.area_m2 == (0.1, 0.2, 0.3)

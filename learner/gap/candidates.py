@@ -24,14 +24,21 @@ from learner.gap.flightdata import FlightData, as_differentiated
 from learner.gap.rotor_forces import Values, rotor_forces_n
 from simbridge.effects import EffectSet
 from simbridge.effects.actuators import thrust_axis_body
-from simbridge.effects.drag import BodyDragParams, RotorDragParams, body_drag_n, rotor_drag_n
+from simbridge.effects.drag import (
+    BodyDragParams,
+    RotorDragParams,
+    body_areas_m2,
+    body_drag_n,
+    rotor_drag_n,
+    rotor_drag_scale,
+)
 from simbridge.effects.ground import (
     CeilingEffectParams,
     GroundEffectParams,
     thrust_gain_array,
 )
 from simbridge.effects.proximity import WallEffectParams, wall_force_array
-from simbridge.vehicle import GRAVITY_M_S2, Vehicle
+from simbridge.vehicle import Vehicle, nano_vehicle
 
 
 @dataclass(frozen=True)
@@ -55,11 +62,8 @@ class Candidate:
         return np.array(self.null, dtype=float) if self.null else np.zeros(len(self.params))
 
 
-# The reference vehicle the catalogue's magnitudes were chosen for: the thesis's nano
-# quadrotor (simbridge/vehicles/nano.yaml). Other vehicles get them scaled (`catalogue`).
-REFERENCE_MASS_KG = 0.056
-REFERENCE_THRUST_COEFFICIENT_N_S2 = 2.39e-5
-REFERENCE_BODY_SIZE_M = (0.08, 0.08, 0.0252)
+# The reference vehicle the catalogue's magnitudes were chosen for is the thesis's nano
+# quadrotor (simbridge/vehicles/nano.yaml); other vehicles get them scaled (`catalogue`).
 # A fitted rho of 21 gives 17% more thrust at three rotor radii, the most real Crazyflies
 # show (6-17% at 2-3 radii); 25 leaves room above it without reaching the simulator's 50.
 RHO_MAX = 25.0
@@ -254,12 +258,6 @@ def implausible_parameters(name: str, value: np.ndarray, cat: dict[str, Candidat
 CANDIDATES: dict[str, Candidate] = {c.name: c for c in REFERENCE}
 
 
-def body_areas_m2(body_size_m: tuple[float, float, float]) -> tuple[float, float, float]:
-    """The body-drag reference areas facing body x, y and z of a box body (m^2)."""
-    x, y, z = body_size_m
-    return (y * z, x * z, x * y)
-
-
 def scale_factors(vehicle: Vehicle) -> dict[str, float]:
     """How the catalogue's dimensional magnitudes grow from the reference vehicle to
     `vehicle`, so that the same relative effect sits at the same place in its range: rotor
@@ -268,14 +266,11 @@ def scale_factors(vehicle: Vehicle) -> dict[str, float]:
     of the weight). The rest needs none: rho and the wall gain are relative to the thrust
     with distances in rotor radii, C_d applies to the vehicle's own areas, the thrust-mass
     error is a ratio, a bias is an acceleration (relative to g), lag and latency are times."""
-    ref_weight = REFERENCE_MASS_KG * GRAVITY_M_S2
-    ref_hover = math.sqrt(ref_weight / (4.0 * REFERENCE_THRUST_COEFFICIENT_N_S2))
-    ref_area = _frontal_area_m2(REFERENCE_BODY_SIZE_M)
-    weight, hover = vehicle.weight_n, vehicle.hover_rotor_speed_rad_s
-    area = _frontal_area_m2(vehicle.body_size_m)
+    nano = nano_vehicle()
+    area, ref_area = _frontal_area_m2(vehicle.body_size_m), _frontal_area_m2(nano.body_size_m)
     return {
-        "rotor_drag": (weight / hover) / (ref_weight / ref_hover),
-        "wind": math.sqrt((weight / area) / (ref_weight / ref_area)),
+        "rotor_drag": rotor_drag_scale(vehicle),  # as the simulator's default rotor drag
+        "wind": math.sqrt((vehicle.weight_n / area) / (nano.weight_n / ref_area)),
     }
 
 
@@ -315,7 +310,9 @@ def catalogue(vehicle: Vehicle) -> dict[str, Candidate]:
 
 def nominal_values(effects: EffectSet, vehicle: Vehicle | None = None) -> Values:
     """The nominal world's effects as candidate values (absent effects are left out). With
-    `vehicle`, a body drag's C_d is restated on the vehicle's own areas (the candidate's)."""
+    `vehicle`, a body drag's C_d is restated on the vehicle's own areas (the candidate's).
+    Drag values the world leaves out are the vehicle's defaults (the nano's without one)."""
+    effects = effects.for_vehicle(vehicle if vehicle is not None else nano_vehicle())
     out: Values = {}
     if effects.ground_effect:
         out["ground_effect"] = np.array([effects.ground_effect.rho])

@@ -6,7 +6,7 @@ in its module. The simulator composes them; the sim-to-real diagnosis fits the s
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from simbridge.config import ConfigError, build
@@ -18,7 +18,13 @@ from simbridge.effects.actuators import (
     ThrustCurveParams,
     ThrustTiltParams,
 )
-from simbridge.effects.drag import BodyDragParams, RotorDragParams, WindParams
+from simbridge.effects.drag import (
+    BodyDragParams,
+    RotorDragParams,
+    WindParams,
+    body_drag_for,
+    rotor_drag_for,
+)
 from simbridge.effects.ground import CeilingEffectParams, GroundEffectParams
 from simbridge.effects.learned import LearnedResidualParams
 from simbridge.effects.proximity import WallEffectParams
@@ -29,6 +35,7 @@ from simbridge.effects.uncatalogued import (
     RotorAsymmetryParams,
     ThrustDecayParams,
 )
+from simbridge.vehicle import Vehicle
 
 
 @dataclass(frozen=True)
@@ -59,6 +66,16 @@ class EffectSet:
 
     def names(self) -> list[str]:
         return [f.name for f in fields(self) if getattr(self, f.name) is not None]
+
+    def for_vehicle(self, vehicle: Vehicle) -> EffectSet:
+        """The effects with the values their world left to the vehicle filled in (drag's
+        coefficients and areas: `simbridge.effects.drag`)."""
+        rotor, body = self.rotor_drag, self.body_drag
+        return replace(
+            self,
+            rotor_drag=None if rotor is None else rotor_drag_for(rotor, vehicle),
+            body_drag=None if body is None else body_drag_for(body, vehicle),
+        )
 
 
 PARAMS_BY_NAME: dict[str, type] = {

@@ -13,37 +13,78 @@ from __future__ import annotations
 import functools
 import math
 import random
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 from simbridge.config import param
+from simbridge.vehicle import Vehicle, nano_vehicle
 
 Vec3 = tuple[float, float, float]
 
 
+# The defaults are the nano's (the reference vehicle). A world that names rotor_drag or
+# body_drag without values on another vehicle gets them restated for it (`for_vehicle`):
+# rotor drag at the same share of the weight per m/s at hover, the body's own areas. The
+# nano's values on a Crazyflie (rotor speeds of about 1700 rad/s, not 76) were a drag of
+# 45% of its weight per m/s, 21 times what Foerster 2015 measured on one.
+# Scaled from the Crazyflie's 9.2e-7, 10.3e-7 kg/rad at its ~7000 rad/s rotor-speed sum to
+# the nano's ~300 rad/s, keeping the drag per m/s at hover (about 6.7e-3 N s/m).
+NANO_ROTOR_DRAG_N_S_M: Vec3 = (2.2e-5, 2.2e-5, 1.0e-5)
+
+
 @dataclass(frozen=True)
 class RotorDragParams:
-    # Default scaled from the Crazyflie's 9.2e-7, 10.3e-7 kg/rad at its ~7000 rad/s rotor-speed
-    # sum to this vehicle's ~300 rad/s, keeping the drag per m/s at hover (about 6.7e-3 N s/m).
-    coefficient_n_s_m: Vec3 = param(
-        (2.2e-5, 2.2e-5, 1.0e-5),
+    coefficient_n_s_m: Vec3 | None = param(
+        None,
         unit="N/((rad/s) (m/s))",
         lo=0.0,
         hi=1e-2,
-        doc="k_d per body axis x, y, z",
+        doc="k_d per body axis x, y, z; null: the nano's (2.2e-5, 2.2e-5, 1e-5) at the same "
+        "share of the vehicle's weight per m/s at hover",
     )
 
 
 @dataclass(frozen=True)
 class BodyDragParams:
     drag_coefficient: float = param(1.0, lo=0.0, hi=5.0, doc="C_d")
-    area_m2: Vec3 = param(
-        (0.002016, 0.002016, 0.0064),
+    area_m2: Vec3 | None = param(
+        None,
         unit="m^2",
         lo=0.0,
         hi=1.0,
-        doc="reference area facing body x, y, z (body 0.08 x 0.08 x 0.0252 m)",
+        doc="reference area facing body x, y, z; null: the faces of the vehicle's body_size_m "
+        "box (the nano's: 0.002016, 0.002016, 0.0064)",
     )
     air_density_kg_m3: float = param(1.225, unit="kg/m^3", lo=0.5, hi=1.5, doc="rho_air")
+
+
+def body_areas_m2(body_size_m: Sequence[float]) -> Vec3:
+    """The body-drag reference areas facing body x, y and z of a box body (m^2)."""
+    x, y, z = body_size_m
+    return (y * z, x * z, x * y)
+
+
+def rotor_drag_scale(vehicle: Vehicle) -> float:
+    """How much larger a rotor-drag coefficient is on `vehicle` than on the nano for the same
+    share of the weight per m/s at hover: (weight / hover rotor speed) over the nano's."""
+    nano = nano_vehicle()
+    return (vehicle.weight_n / vehicle.hover_rotor_speed_rad_s) / (
+        nano.weight_n / nano.hover_rotor_speed_rad_s
+    )
+
+
+def rotor_drag_for(params: RotorDragParams, vehicle: Vehicle) -> RotorDragParams:
+    if params.coefficient_n_s_m is not None:
+        return params
+    f = rotor_drag_scale(vehicle)
+    kx, ky, kz = NANO_ROTOR_DRAG_N_S_M
+    return RotorDragParams(coefficient_n_s_m=(kx * f, ky * f, kz * f))
+
+
+def body_drag_for(params: BodyDragParams, vehicle: Vehicle) -> BodyDragParams:
+    if params.area_m2 is not None:
+        return params
+    return replace(params, area_m2=body_areas_m2(vehicle.body_size_m))
 
 
 @dataclass(frozen=True)
@@ -87,14 +128,18 @@ def wind_velocity_m_s(params: WindParams, time_s: float) -> Vec3:
 
 
 def rotor_drag_n(params: RotorDragParams, rotor_speed_sum_rad_s: float, v_air_body: Vec3) -> Vec3:
-    """Body-frame rotor drag force (floats, or numpy arrays of speeds and components)."""
+    """Body-frame rotor drag force (floats, or numpy arrays of speeds and components); the
+    coefficients restated for the vehicle first (`rotor_drag_for`)."""
+    assert params.coefficient_n_s_m is not None, "rotor_drag_for(params, vehicle) first"
     kx, ky, kz = params.coefficient_n_s_m
     s = -rotor_speed_sum_rad_s
     return (s * kx * v_air_body[0], s * ky * v_air_body[1], s * kz * v_air_body[2])
 
 
 def body_drag_n(params: BodyDragParams, v_air_body: Vec3) -> Vec3:
-    """Body-frame quadratic drag force (floats, or numpy arrays of components)."""
+    """Body-frame quadratic drag force (floats, or numpy arrays of components); the areas
+    restated for the vehicle first (`body_drag_for`)."""
+    assert params.area_m2 is not None, "body_drag_for(params, vehicle) first"
     vx, vy, vz = v_air_body
     speed = (vx * vx + vy * vy + vz * vz) ** 0.5
     q = -0.5 * params.air_density_kg_m3 * params.drag_coefficient * speed
