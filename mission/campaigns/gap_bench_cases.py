@@ -286,6 +286,19 @@ def _hard_cases(drag: list[float]) -> list[Case]:
                 "thrust_tilt": {"ax": 1.0, "ay": -1.0},
             },
         ),
+        # on the 2.7 kg quadrotor: its own body's drag beside a wind, both worlds with the
+        # default rotor drag (each drag on the vehicle's own scale, not the nano's)
+        Case(
+            "heavy_body_drag_wind",
+            (
+                {"name": "body_drag", "drag_coefficient": 1.4},
+                {"name": "wind", "mean_m_s": [-1.5, 1.0, 0.0]},
+            ),
+            {"body_drag": {"drag_coefficient": 1.4}, "wind": {"wx": -1.5, "wy": 1.0}},
+            kind="aggressive",
+            nominal=(GE, DRAG),
+            world={"vehicle": "quad_2_7kg"},
+        ),
         # the real ground effect has another shape than the nominal thesis law (rho 1), which
         # it replaces: as strong at rest (53% of a rotor's thrust; less and the autopilot,
         # subtracting the law's 53%, never leaves the ground), 30% at 4 cm (the law: 9%), 8%
