@@ -8,7 +8,8 @@
     (3.13) phi_dc   = arctan((a_v - f_v / m) / (-a_w - g + f_w / m))
     (3.14) eta'' = k_p (eta_d - eta) + k_d (eta_d' - eta'),  eta = (phi, theta, psi)
     (3.15) eta'' = W w' + W' w  ->  w' = W^-1 (eta'' - W' w);  M = I w' + w x I w
-    (3.5, 3.6) inverted by the mixer; rotor speeds saturated to [0, n_max]
+    (3.5, 3.6) inverted by the mixer within [0, n_max], yaw given up first, then thrust,
+               then roll and pitch (their direction kept)
 
 u, v, w is the world frame turned by the yaw; f is the ground-effect estimate (world frame,
 N). Angles are Z-Y-X Euler angles of the body (x forward, y left, z up): a positive theta
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 
 from simbridge.config import param
 from simbridge.frames import Quat, Vec3, euler_from_quat
-from simbridge.rotors import Quad, rotor_forces_for, rotor_speeds_for
+from simbridge.rotors import Quad, prioritised_rotor_forces, rotor_speeds_for
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
 # Below this the vertical term of 3.12 and 3.13 would flip the desired tilt: commanding a
@@ -262,7 +263,14 @@ def control(
         izz * dwz + (iyy - ixx) * wx * wy,
     )
 
-    forces = rotor_forces_for(thrust, moments, vehicle.arm_m, vehicle.yaw_moment_coefficient_m)
+    n_max = vehicle.max_rotor_speed_rad_s
+    forces = prioritised_rotor_forces(
+        thrust,
+        moments,
+        vehicle.arm_m,
+        vehicle.yaw_moment_coefficient_m,
+        vehicle.thrust_coefficient_n_s2 * n_max * n_max,
+    )
     speeds = rotor_speeds_for(
         vehicle.thrust_coefficient_n_s2, forces, vehicle.max_rotor_speed_rad_s
     )

@@ -47,6 +47,45 @@ def rotor_forces_for(
     return (t + x - y - z, t + x + y + z, t - x + y - z, t - x - y + z)
 
 
+def prioritised_rotor_forces(
+    thrust_n: float,
+    moments_n_m: tuple[float, float, float],
+    arm_m: float,
+    yaw_moment_coefficient_m: float,
+    max_rotor_force_n: float,
+) -> Quad:
+    """`rotor_forces_for` within [0, f_max], giving up what matters least first, as PX4's
+    and the Crazyflie's mixers do: the yaw moment, then the collective thrust, last the roll
+    and pitch moments (their direction kept). Clipping each rotor alone instead turns a yaw
+    demand into a roll or pitch moment nobody asked for: a laggy or heavy vehicle at full
+    tilt then tumbles. Unchanged (bit for bit) whenever the plain inverse fits."""
+    forces = rotor_forces_for(thrust_n, moments_n_m, arm_m, yaw_moment_coefficient_m)
+    f_max = max_rotor_force_n
+    if all(0.0 <= f <= f_max for f in forces):
+        return forces
+    mx, my, mz = moments_n_m
+    x, y, z = mx / (4.0 * arm_m), my / (4.0 * arm_m), mz / (4.0 * yaw_moment_coefficient_m)
+    tilt = (x - y, x + y, -x + y, -x - y)  # roll and pitch, per rotor
+    spread = max(tilt) - min(tilt)
+    if spread > f_max:  # even at the best thrust: less tilt moment, the same direction
+        scale = f_max / spread
+        tilt = (tilt[0] * scale, tilt[1] * scale, tilt[2] * scale, tilt[3] * scale)
+    # the collective thrust moved as little as keeps every rotor in range
+    t = min(max(thrust_n / 4.0, -min(tilt)), f_max - max(tilt))
+    base = (t + tilt[0], t + tilt[1], t + tilt[2], t + tilt[3])
+    yaw = (-z, z, -z, z)
+    share = 1.0  # of the yaw moment that fits
+    for b, w in zip(base, yaw, strict=True):
+        if w > 0.0:
+            share = min(share, (f_max - b) / w)
+        elif w < 0.0:
+            share = min(share, b / -w)
+    share = max(share, 0.0)
+    return tuple(  # type: ignore[return-value]
+        min(max(b + share * w, 0.0), f_max) for b, w in zip(base, yaw, strict=True)
+    )
+
+
 def rotor_speeds_for(
     thrust_coefficient_n_s2: float, rotor_forces: Quad, max_rotor_speed_rad_s: float
 ) -> Quad:
