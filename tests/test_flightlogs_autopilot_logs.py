@@ -381,3 +381,17 @@ def test_gap_diagnose_reads_written_autopilot_logs(tmp_path: Path) -> None:
     assert r.returncode == 0, r.stderr
     assert "Traceback" not in r.stderr
     assert (out / "report.md").is_file() and (out / "gap.json").is_file()
+
+
+def test_a_real_px4_log_that_never_flew_is_refused_with_what_was_left_out(
+    tmp_path: Path,
+) -> None:
+    """pyulog's sample: 9.5 s disarmed (PWM 900) on a bench 0.2-0.5 m above its local frame's
+    zero. Its rows once stopped the run as 'implausible for a flying vehicle' (a full
+    weight of residual); all in contact, a sibling sample ended in an IndexError."""
+    r = run_groundfx("gap", "diagnose", str(ULOG), "--world", "default", "--no-replay",
+                     "--out", str(tmp_path / "out"), timeout=300)  # fmt: skip
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    message = r.stderr.strip().splitlines()[-1]
+    assert "only 0 of" in message and "rows are airborne and usable" in message
+    assert re.search(r"\d+ rows standing with the rotors stopped", message)
