@@ -13,6 +13,7 @@ import pytest
 
 from learner.flightlogs.flightlog import write_log
 from learner.gap.flightdata import prepare
+from learner.gap.unexplained import sentence
 from mission.campaigns.gap_diagnosis import run_diagnosis
 from simbridge.config import ConfigError
 from simbridge.physics import Simulation
@@ -173,3 +174,12 @@ def test_an_effect_that_differs_between_flights_is_not_named_with_confidence(
     assert "f1" in curve["confidence_note"] and "physical range" in curve["confidence_note"]
     report = (tmp_path / "out/report.md").read_text()
     assert "| thrust_curve | present |" in report and "not named with confidence" in report
+
+
+def test_a_large_remainder_no_network_carries_over_is_not_called_nothing() -> None:
+    """Neural-Swarm's two-vehicle flights: the catalogue left 57% of the gap and a network
+    on the vehicle's state removed none of it on the held-out flight (the neighbour's wake
+    is not in the state). That is not "nothing systematic left"; a small remainder is."""
+    large = sentence(0.57, -0.14, False)
+    assert "nothing systematic" not in large and "differs between them" in large
+    assert "nothing systematic is left" in sentence(0.05, -0.14, False)

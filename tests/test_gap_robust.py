@@ -241,6 +241,39 @@ def test_standing_with_the_rotors_stopped_is_left_out_even_where_the_heights_mis
     assert present == []  # the nominal world flew: nothing to name
 
 
+def test_commands_beyond_the_rotors_maximum_are_clamped_as_the_simulator_clamps_them(
+    tmp_path: Path,
+) -> None:
+    """A Crazyflie logs the force it asks of a rotor, up to 1.7 times what the rotor gives
+    (Neural-Swarm's two-vehicle flights: a rotor at 98% of n_max in 12% of the rows). The
+    vehicle flew the clamped command, as the simulator would: modelled unclamped, those rows
+    read as a thrust deficit of a third of the weight and a thrust curve of 0.36."""
+    world = world_file(tmp_path / "world.yaml")
+    w = load_world(world)
+    logs = []
+    for seed in (0, 1):
+        log = synthetic_log(f"f{seed}", NANO, world, {}, seed, seconds=10.0)
+        n = log.rotor_speeds_rad_s.copy()
+        burst = (np.arange(len(n)) % 200) < 20  # 10% of the rows: one rotor asked too much
+        n[burst, 1] = 1.4 * NANO.max_rotor_speed_rad_s
+        flown = dataclasses.replace(
+            log, rotor_speeds_rad_s=np.minimum(n, NANO.max_rotor_speed_rad_s)
+        )
+        d = prepare(flown, w, NANO)
+        acc = world_force(nominal_values(w.effects, NANO), d, NANO) / NANO.mass_kg
+        acc[:, 2] -= GRAVITY_M_S2
+        logged = dataclasses.replace(log, rotor_speeds_rad_s=n, acceleration_m_s2=acc)
+        assert prepare(logged, w, NANO).left_out["clamped_rows"] == int(burst.sum())
+        logs.append(write_log(logged, tmp_path / f"f{seed}.csv"))
+    out = tmp_path / "out"
+    run_diagnosis(logs[:1], logs[1:], str(world), out, folds=2, replay=False, candidates=FEW)
+    figures = json.loads((out / "gap.json").read_text())
+    present = [e for e, r in figures["effects"].items() if r["status"] == "present"]
+    assert present == []
+    assert figures["gap"]["force_rms_n"]["before"] < 1e-3  # the nominal world fits
+    assert any("clamped there, as the simulator clamps them" in n for n in figures["notes"])
+
+
 # 2. a replay the corrected world cannot fly --------------------------------------------------
 
 

@@ -92,6 +92,14 @@ def fallback_notes(fit: list[FlightData], hold: list[FlightData], folds: int) ->
             f"cross-validation: --folds {folds} asked with {n} fitting flights: {n} folds, "
             "one flight left out at a time"
         )
+    clamped = {d.name: d.left_out.get("clamped_rows", 0) for d in fit + hold}
+    if any(clamped.values()):
+        per = ", ".join(f"{name} {rows}" for name, rows in clamped.items() if rows)
+        notes.append(
+            "rotor commands beyond the vehicle's max_rotor_speed_rad_s clamped there, as the "
+            f"simulator clamps them (rows with a rotor beyond it: {per}): a vehicle whose "
+            "rotors give more would show a residual where a rotor saturates"
+        )
     derived = [d.name for d in fit + hold if not d.measured_acceleration]
     if derived:
         notes.append(

@@ -329,6 +329,14 @@ def prepare(log: FlightLog, world: World, vehicle: Vehicle) -> FlightData:
     acc = log.acceleration_m_s2 if measured else differentiate(t, log.velocity_m_s, segment, dt)
     hubs = p_mid[:, None, :] + np.einsum("nij,kj->nki", rotation, vehicle.rotor_positions_body_m())
     flat = hubs.reshape(-1, 3)
+    # the simulator clamps a command to the vehicle's [0, n_max]: so does its model here (a
+    # Crazyflie's logged motor.f asks up to 1.7 times what its rotors give)
+    n_max = vehicle.max_rotor_speed_rad_s
+    commands = log.rotor_speeds_rad_s
+    beyond = np.any(commands > n_max, axis=1)
+    if beyond.any():
+        commands = np.minimum(commands, n_max)
+    left_out = {**left_out, "clamped_rows": int(beyond.sum())}
     fx = world.effects
     down = fx.ground_effect.ray_length_m if fx.ground_effect else 3.0
     up = fx.ceiling_effect.ray_length_m if fx.ceiling_effect else 3.0
@@ -343,7 +351,7 @@ def prepare(log: FlightLog, world: World, vehicle: Vehicle) -> FlightData:
         velocity_at_m_s=log.velocity_m_s,
         rotation=rotation,
         rates_rad_s=log.body_rates_rad_s,
-        commands_rad_s=log.rotor_speeds_rad_s,
+        commands_rad_s=commands,
         acceleration_m_s2=acc,
         measured_acceleration=measured,
         rotor_heights_m=height_below_m(flat, world.obstacles, down).reshape(-1, 4),

@@ -197,10 +197,19 @@ def sentence(share: float, learnable: float, significant: bool) -> str:
             f"{learnable * 100:.0f}% of it on flights it was not trained on. No catalogue "
             "effect explains it; the effects named may stand in for one outside the catalogue"
         )
-    return (
+    head = (
         f"the catalogue leaves {share * 100:.0f}% of the systematic force gap; a network on "
         f"the regime features removes {learnable * 100:.0f}% of that on flights it was not "
-        "trained on: nothing systematic is left that the catalogue misses"
+        "trained on"
+    )
+    if share < SHARE_MIN:
+        return head + ": nothing systematic is left that the catalogue misses"
+    # a large share no function of the state carries from flight to flight: real, but not
+    # the vehicle's (a neighbour's wake, gusts), and no effect of the simulator would give it
+    return head + (
+        ": what is left is no function of the vehicle's state that holds from flight to "
+        "flight (it differs between them: another vehicle's wake, gusts, the logs "
+        "themselves), so no effect of the simulator's would reproduce it"
     )
 
 
