@@ -4,6 +4,8 @@ to the exact set and 10% parameter error."""
 
 from __future__ import annotations
 
+import dataclasses
+
 from mission.campaigns.gap_bench import score, summarise, table
 from mission.campaigns.gap_bench_cases import CASES, real_effects
 from simbridge.effects import PARAMS_BY_NAME, UNCATALOGUED, parse_effects
@@ -70,6 +72,9 @@ def test_a_weak_rotor_is_located_by_a_significant_negative_thrust_error_on_its_r
     assert score(case, nested)["uncatalogued"]["located"] is True
     rotors[2]["thrust_error"] = 0.1
     assert score(case, result(rotors=rotors))["uncatalogued"]["located"] is False
+    # a rotor stronger than modelled (a blind case: 8% more) is located by a positive one
+    strong = dataclasses.replace(case, expected_regime=("rotor", 2, 1))
+    assert score(strong, result(rotors=rotors))["uncatalogued"]["located"] is True
 
 
 def test_a_catalogue_case_meets_its_target_with_the_exact_set_within_ten_percent():

@@ -28,6 +28,7 @@ class Case:
     # where an out-of-catalogue effect should be located: (regime variable, residual
     # component, upper bound of the bin's low edge or None), as the diagnosis's
     # `unexplained.where` entries read, or ("rotor", i) for a rotor whose thrust is low
+    # (("rotor", i, 1): high)
     expected_regime: tuple[Any, ...] = ()
 
 

@@ -4,7 +4,8 @@ name it, so it is scored on what it says about it instead:
 - located: the unexplained residual is placed in the expected regime (an entry of
   `unexplained.where` with the expected variable and component, its bin starting below a
   bound; for the time since take-off, also a significant falling trend in the whole-flight
-  summaries), or, for a weak rotor, a significant negative thrust error on that rotor;
+  summaries), or, for a weak rotor, a significant negative thrust error on that rotor (a
+  positive one for a rotor stronger than modelled);
 - no catalogue effect declared present with confidence (`confident`, true when absent);
 - the unexplained share reported (a number);
 - the learnt residual shrinks the held-out force gap by at least LEARNED_SHRINK_MIN.
@@ -45,8 +46,11 @@ def located(expected: tuple[Any, ...], result: dict[str, Any]) -> bool | None:
         rotors = _rotors(result)
         if rotors is None:
             return None
+        sign = expected[2] if len(expected) > 2 else -1  # a weak rotor, unless said strong
         return any(
-            r.get("rotor") == expected[1] and r.get("significant") and r.get("thrust_error", 0) < 0
+            r.get("rotor") == expected[1]
+            and r.get("significant")
+            and r.get("thrust_error", 0) * sign > 0
             for r in rotors
         )
     variable, component, upper = expected
