@@ -189,6 +189,30 @@ def test_hash_header_and_comment_lines(tmp_path: Path) -> None:
     assert got.rotor_speeds_rad_s == pytest.approx(log.rotor_speeds_rad_s)
 
 
+def test_rows_written_twice_out_of_order_or_with_a_gap_in_a_cell_are_dropped_and_said(
+    tmp_path: Path,
+) -> None:
+    """A user's CSV as loggers write it: a row written twice, two rows swapped, an empty
+    cell. The repeated stamp once made a zero time step (numpy's divide-by-zero warnings,
+    then NaN in the diagnosis's derivatives)."""
+    log = known_flight()
+    cols = state_columns(log) | {f"n{i}_rad_s": log.rotor_speeds_rad_s[:, i] for i in range(4)}
+    rows = np.column_stack(list(cols.values()))
+    rows = np.insert(rows, 50, rows[50], axis=0)  # written twice
+    rows[[100, 101]] = rows[[101, 100]]  # swapped
+    rows[200, 3] = np.nan  # z missing
+    path = write_csv(tmp_path / "u.csv", dict(zip(cols, rows.T, strict=True)))
+    got = read_log(path)
+    keep = np.ones(len(log.time_s), bool)
+    keep[199] = False  # the swap and the copy moved the empty cell's row one place
+    assert got.time_s == pytest.approx(log.time_s[keep])
+    assert np.all(np.diff(got.time_s) > 0.0)
+    assert np.all(np.isfinite(got.position_m))
+    notes = got.meta["conversions"]
+    assert "rows: 1 row with a missing or non-finite value dropped" in notes
+    assert "rows: 1 row repeating an earlier time stamp dropped" in notes
+
+
 def test_list_cells_and_the_neural_fly_mapping(tmp_path: Path) -> None:
     """Neural-Fly's layout: a pandas index, lists as text, q as (x, y, z, w), throttle over a
     per-row hover throttle; read with the packaged mapping on a 2.69 kg vehicle."""

@@ -272,14 +272,45 @@ def table_log(
     elif acc is None:
         notes.append("acceleration: not logged; the diagnosis differentiates the velocity")
     rotors = _rotor_speeds(m, raw, path, source, vehicle, notes, stack)
-    order = np.argsort(t, kind="stable")
-    arrays = [a[order] if a is not None else None for a in (t, pos, vel, q, rates, rotors, acc)]
     battery = column("battery_v", False)
+    order = _clean_order(t, (pos, vel, q, rates, rotors, acc), notes)
+    arrays = [a[order] if a is not None else None for a in (t, pos, vel, q, rates, rotors, acc)]
     return FlightLog(
         path.stem, *arrays[:6], acceleration_m_s2=arrays[6],
         battery_v=None if battery is None else battery[order],
         meta={**(meta or {}), "conversions": notes},
     )  # fmt: skip
+
+
+def _clean_order(
+    t: np.ndarray, columns: tuple[np.ndarray | None, ...], notes: list[str]
+) -> np.ndarray:
+    """The rows to keep, in time order: rows with a value missing (NaN, inf) in a column the
+    diagnosis reads are dropped, and of rows with the same time stamp the first is kept (a
+    logger that writes a row twice; a zero time step would divide by zero downstream). Each
+    is counted in the notes."""
+    finite = np.isfinite(t)
+    for a in columns:
+        if a is not None:
+            finite &= np.all(np.isfinite(a.reshape(len(t), -1)), axis=1)
+    if not finite.all():
+        notes.append(
+            f"rows: {_rows_text(int((~finite).sum()))} with a missing or non-finite value dropped"
+        )
+    order = np.flatnonzero(finite)
+    order = order[np.argsort(t[order], kind="stable")]
+    if len(order) > 1:
+        repeated = np.concatenate([[False], np.diff(t[order]) <= 0.0])
+        if repeated.any():
+            notes.append(
+                f"rows: {_rows_text(int(repeated.sum()))} repeating an earlier time stamp dropped"
+            )
+            order = order[~repeated]
+    return order
+
+
+def _rows_text(n: int) -> str:
+    return f"{n} row" if n == 1 else f"{n} rows"
 
 
 def _time_s(m: ColumnMapping, raw: dict, path: Path, source: Any, notes: list[str]) -> np.ndarray:

@@ -92,6 +92,10 @@ def fallback_notes(fit: list[FlightData], hold: list[FlightData], folds: int) ->
             f"cross-validation: --folds {folds} asked with {n} fitting flights: {n} folds, "
             "one flight left out at a time"
         )
+    for d in fit + hold:  # rows the reader dropped (non-finite values, repeated stamps)
+        dropped = [c for c in d.meta.get("conversions", []) if c.startswith("rows: ")]
+        if dropped:
+            notes.append(f"{d.name}: " + "; ".join(c.removeprefix("rows: ") for c in dropped))
     clamped = {d.name: d.left_out.get("clamped_rows", 0) for d in fit + hold}
     if any(clamped.values()):
         per = ", ".join(f"{name} {rows}" for name, rows in clamped.items() if rows)
