@@ -264,7 +264,9 @@ def table_log(
             body = m.accelerometer is not None and m.accelerometer[1] == "body"
             acc = _rows(frd_to_flu if body else ned_to_enu, acc)
         notes.append("frame: world NED, body FRD -> world ENU, body FLU")
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    norm = np.linalg.norm(q, axis=1, keepdims=True)
+    # a zero quaternion is no attitude: NaN, dropped with the row below
+    q = q / np.where(norm > 0.0, norm, np.nan)
     if acc is not None and m.accelerometer is not None:
         gravity, frame = m.accelerometer
         acc = kinematic_acceleration(acc, q, gravity, frame)
