@@ -209,7 +209,8 @@ def sentence(share: float, learnable: float, significant: bool) -> str:
     return head + (
         ": what is left is no function of the vehicle's state that holds from flight to "
         "flight (it differs between them: another vehicle's wake, gusts, the logs "
-        "themselves), so no effect of the simulator's would reproduce it"
+        "themselves; or, where the gap is near the noise floor, noise), so no effect of the "
+        "simulator's would reproduce it"
     )
 
 
