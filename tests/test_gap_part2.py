@@ -14,6 +14,7 @@ import pytest
 from learner.flightlogs.flightlog import write_log
 from learner.gap.flightdata import prepare
 from learner.gap.unexplained import sentence
+from learner.gap.verdicts import mark_confidence
 from mission.campaigns.gap_diagnosis import run_diagnosis
 from simbridge.config import ConfigError
 from simbridge.physics import Simulation
@@ -183,3 +184,20 @@ def test_a_large_remainder_no_network_carries_over_is_not_called_nothing() -> No
     large = sentence(0.57, -0.14, False)
     assert "nothing systematic" not in large and "differs between them" in large
     assert "nothing systematic is left" in sentence(0.05, -0.14, False)
+
+
+def test_effects_named_beside_a_remainder_larger_than_what_they_explain_are_not_confident() -> None:
+    """Neural-Swarm's large pair: a thrust curve and a latency named while 57% of the gap is
+    left, which no network carries to the held-out flight (a neighbour's wake). Learnable or
+    not, a catalogue that explains less than it leaves names nothing with confidence."""
+    for share, learnable, confident in ((0.57, False, False), (0.3, False, True),
+                                        (0.3, True, False)):  # fmt: skip
+        effects = {"thrust_curve": {"status": "present"}, "wind": {"status": "absent"}}
+        mark_confidence(effects, {"share": share, "significant": learnable})
+        assert effects["thrust_curve"]["confident"] is confident
+        assert "confident" not in effects["wind"]
+        if not confident:
+            assert (
+                f"leaves {share * 100:.0f}% of the gap"
+                in effects["thrust_curve"]["confidence_note"]
+            )

@@ -359,15 +359,29 @@ def _mark_disagreeing_flights(
     e["confidence_note"] = "; ".join(filter(None, [e.get("confidence_note"), note]))
 
 
+# Left with at least this share of the gap, the catalogue explains less than it leaves: an
+# effect it names may stand in for what it misses, learnable from the state or not (a
+# neighbour's wake differs from flight to flight and no network carries it over)
+MOSTLY_UNEXPLAINED = 0.5
+
+
 def mark_confidence(effects: dict[str, dict[str, Any]], unexplained: dict[str, Any]) -> None:
-    """An effect is named with confidence only when nothing systematic is left beside it:
-    otherwise it may stand in for an effect outside the catalogue."""
+    """An effect is named with confidence only when nothing systematic is left beside it, and
+    the catalogue explains at least half of the gap: otherwise it may stand in for an effect
+    outside the catalogue."""
+    share = unexplained["share"]
+    doubtful = unexplained["significant"] or share >= MOSTLY_UNEXPLAINED
     for e in effects.values():
         if e["status"] != "present":
             continue
-        e["confident"] = not unexplained["significant"]
+        e["confident"] = not doubtful
         if unexplained["significant"]:
             e["confidence_note"] = (
-                f"the catalogue leaves {unexplained['share'] * 100:.0f}% of the gap, "
+                f"the catalogue leaves {share * 100:.0f}% of the gap, "
                 "systematic: this effect may stand in for one outside the catalogue"
+            )
+        elif doubtful:
+            e["confidence_note"] = (
+                f"the catalogue leaves {share * 100:.0f}% of the gap, more than it explains: "
+                "this effect may stand in for one outside the catalogue"
             )
