@@ -1,8 +1,9 @@
-"""An accelerometer bias or a leaning thrust axis: both put a body-fixed horizontal offset in
-the residual, and a flight at one heading cannot tell them apart by the fit. The logs can,
-where they carry an accelerometer: a bias is in the logged acceleration only, so its mean
-departs from the velocity's change over the flight; a leaning thrust is a real force, which
-the vehicle's attitude holds against, and the logged acceleration agrees with the velocity.
+"""An accelerometer bias or a leaning thrust axis (or a wind: `MEASURED_PAIRS`): each puts a
+horizontal offset in the residual, and a flight at one heading cannot tell them apart by the
+fit. The logs can, where they carry an accelerometer: a bias is in the logged acceleration
+only, so its mean departs from the velocity's change over the flight; a leaning thrust or a
+wind is a real force, which moves the velocity too, and the logged acceleration agrees with
+it.
 """
 
 from __future__ import annotations
@@ -20,6 +21,9 @@ SHARE = 0.5
 # judge: a velocity's noise over a flight and a thrust's ripple reach a few mm/s^2
 MIN_OFFSET_M_S2 = 0.03
 BIAS_OR_TILT = frozenset({"sensor_bias", "thrust_tilt"})
+# a bias beside a real horizontal force (a lean, a wind at one heading): the same offset in
+# the residual, told apart by the logged acceleration alone
+MEASURED_PAIRS = (BIAS_OR_TILT, frozenset({"sensor_bias", "wind"}))
 
 
 def logged_offset_m_s2(flights: list[FlightData]) -> np.ndarray | None:
@@ -81,12 +85,12 @@ def measured_bias(member: np.ndarray, logged: np.ndarray) -> bool:
     return size >= MIN_OFFSET_M_S2 and float(np.linalg.norm(g - m)) <= SHARE * size
 
 
-def told_apart(problem: Problem, values: Values) -> bool:
-    """Whether a bias and a lean fitted together (`values` holds both) are each what the logs
-    say: the residual cannot tell them apart at one heading, but the logged acceleration's
-    mean departs from the velocity's change by the bias alone (a lean is a real force, which
-    moves the velocity too)."""
-    if not set(values) >= BIAS_OR_TILT:
+def told_apart(problem: Problem, values: Values, pair: frozenset[str] = BIAS_OR_TILT) -> bool:
+    """Whether a bias and a real force (a lean, or a wind: `pair`) fitted together (`values`
+    holds both) are each what the logs say: the residual cannot tell them apart at one
+    heading, but the logged acceleration's mean departs from the velocity's change by the
+    bias alone (a force moves the velocity too)."""
+    if pair not in MEASURED_PAIRS or not set(values) >= pair:
         return False
     logged = logged_offset_m_s2(problem.flights)
     if logged is None:

@@ -111,11 +111,10 @@ def collinear_with_chosen(problem: Problem, f: Fit, added: tuple[str, ...]) -> l
     if not before:
         return []
     sens = {n: sensitivities(problem, n, f.values) for n in (*before, *added)}
-    told_apart = bias_or_tilt.told_apart(problem, f.values)
     out = []
     for a in added:
         for b in before:
-            if told_apart and {a, b} == bias_or_tilt.BIAS_OR_TILT:
+            if bias_or_tilt.told_apart(problem, f.values, frozenset({a, b})):
                 continue
             r2 = max(collinearity_r2(sens[a], sens[b]), collinearity_r2(sens[b], sens[a]))
             if r2 >= COLLINEAR_R2:

@@ -155,12 +155,11 @@ def _alternatives_ruled_out(
     out = {}
     cat = problem.catalogue
     for other in group:
-        if {name, other} == bias_or_tilt.BIAS_OR_TILT and bias_or_tilt.told_apart(
-            problem, best.values
-        ):
+        if bias_or_tilt.told_apart(problem, best.values, frozenset({name, other})):
+            force = "lean" if "thrust_tilt" in (name, other) else "wind"
             out[other] = (
                 "both fitted, and the logged acceleration's mean departs from the velocity's "
-                "change by the bias's share alone: the lean is a force, the bias the sensor's"
+                f"change by the bias's share alone: the {force} is a force, the bias the sensor's"
             )
             continue
         if other in best.values:
