@@ -37,14 +37,27 @@ def rotor_forces_for(
     yaw_moment_coefficient_m: float,
 ) -> Quad:
     """Inverse of equation 3.6: the rotor forces that give thrust T and moments M."""
+    return _mixed(*_per_rotor_shares(thrust_n, moments_n_m, arm_m, yaw_moment_coefficient_m))
+
+
+def _mixed(t: float, x: float, y: float, z: float) -> Quad:
+    return (t + x - y - z, t + x + y + z, t - x + y - z, t - x - y + z)
+
+
+def _per_rotor_shares(
+    thrust_n: float,
+    moments_n_m: tuple[float, float, float],
+    arm_m: float,
+    yaw_moment_coefficient_m: float,
+) -> tuple[float, float, float, float]:
+    """Each rotor's share of the thrust and of the moments about x, y and z (N)."""
     mx, my, mz = moments_n_m
-    t, x, y, z = (
+    return (
         thrust_n / 4.0,
         mx / (4.0 * arm_m),
         my / (4.0 * arm_m),
         mz / (4.0 * yaw_moment_coefficient_m),
     )
-    return (t + x - y - z, t + x + y + z, t - x + y - z, t - x - y + z)
 
 
 def prioritised_rotor_forces(
@@ -59,19 +72,18 @@ def prioritised_rotor_forces(
     and pitch moments (their direction kept). Clipping each rotor alone instead turns a yaw
     demand into a roll or pitch moment nobody asked for: a laggy or heavy vehicle at full
     tilt then tumbles. Unchanged (bit for bit) whenever the plain inverse fits."""
-    forces = rotor_forces_for(thrust_n, moments_n_m, arm_m, yaw_moment_coefficient_m)
+    t, x, y, z = _per_rotor_shares(thrust_n, moments_n_m, arm_m, yaw_moment_coefficient_m)
+    forces = _mixed(t, x, y, z)
     f_max = max_rotor_force_n
     if all(0.0 <= f <= f_max for f in forces):
         return forces
-    mx, my, mz = moments_n_m
-    x, y, z = mx / (4.0 * arm_m), my / (4.0 * arm_m), mz / (4.0 * yaw_moment_coefficient_m)
     tilt = (x - y, x + y, -x + y, -x - y)  # roll and pitch, per rotor
     spread = max(tilt) - min(tilt)
     if spread > f_max:  # even at the best thrust: less tilt moment, the same direction
         scale = f_max / spread
         tilt = (tilt[0] * scale, tilt[1] * scale, tilt[2] * scale, tilt[3] * scale)
     # the collective thrust moved as little as keeps every rotor in range
-    t = min(max(thrust_n / 4.0, -min(tilt)), f_max - max(tilt))
+    t = min(max(t, -min(tilt)), f_max - max(tilt))
     base = (t + tilt[0], t + tilt[1], t + tilt[2], t + tilt[3])
     yaw = (-z, z, -z, z)
     share = 1.0  # of the yaw moment that fits

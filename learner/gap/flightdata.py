@@ -162,6 +162,13 @@ IMPACT_THRUSTS = 3.0
 IMPACT_GUARD_ROWS = 2  # either side of an impact: differentiation and smoothing spread it
 
 
+def _kinematic_acceleration(log: FlightLog) -> np.ndarray:
+    """The logged acceleration, else the velocity's raw derivative (enough for the coarse
+    thresholds of a crash or a standstill; the fits use `differentiate`)."""
+    a = log.acceleration_m_s2
+    return np.gradient(log.velocity_m_s, log.time_s, axis=0) if a is None else a
+
+
 def crashing(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
     """Rows of a crash: the body upside down (its z axis below the horizon: no multirotor
     flies so), or an impact (a specific force beyond IMPACT_THRUSTS times the rotors' full
@@ -173,9 +180,7 @@ def crashing(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
     out = 1.0 - 2.0 * (x * x + y * y) < 0.0  # R[2, 2]: body z against world z
     if rows < 2:
         return out
-    a = log.acceleration_m_s2
-    if a is None:
-        a = np.gradient(log.velocity_m_s, log.time_s, axis=0)
+    a = _kinematic_acceleration(log)
     full_thrust = 4.0 * vehicle.thrust_coefficient_n_s2 * vehicle.max_rotor_speed_rad_s**2
     limit = IMPACT_THRUSTS * full_thrust / vehicle.mass_kg
     impact = np.flatnonzero(np.linalg.norm(a + np.array([0.0, 0.0, GRAVITY_M_S2]), axis=1) > limit)
@@ -202,9 +207,7 @@ def held_up(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
     if rows < 2:
         return np.zeros(rows, bool)
     thrust_n = vehicle.thrust_coefficient_n_s2 * np.sum(log.rotor_speeds_rad_s**2, axis=1)
-    a = log.acceleration_m_s2
-    if a is None:
-        a = np.gradient(log.velocity_m_s, log.time_s, axis=0)
+    a = _kinematic_acceleration(log)
     candidate = (
         (thrust_n < HELD_THRUST_SHARE * vehicle.mass_kg * GRAVITY_M_S2)
         & (np.linalg.norm(log.velocity_m_s, axis=1) < HELD_SPEED_M_S)

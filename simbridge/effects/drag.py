@@ -130,7 +130,6 @@ def wind_velocity_m_s(params: WindParams, time_s: float) -> Vec3:
 def rotor_drag_n(params: RotorDragParams, rotor_speed_sum_rad_s: float, v_air_body: Vec3) -> Vec3:
     """Body-frame rotor drag force (floats, or numpy arrays of speeds and components); the
     coefficients restated for the vehicle first (`rotor_drag_for`)."""
-    assert params.coefficient_n_s_m is not None, "rotor_drag_for(params, vehicle) first"
     kx, ky, kz = params.coefficient_n_s_m
     s = -rotor_speed_sum_rad_s
     return (s * kx * v_air_body[0], s * ky * v_air_body[1], s * kz * v_air_body[2])
@@ -139,7 +138,6 @@ def rotor_drag_n(params: RotorDragParams, rotor_speed_sum_rad_s: float, v_air_bo
 def body_drag_n(params: BodyDragParams, v_air_body: Vec3) -> Vec3:
     """Body-frame quadratic drag force (floats, or numpy arrays of components); the areas
     restated for the vehicle first (`body_drag_for`)."""
-    assert params.area_m2 is not None, "body_drag_for(params, vehicle) first"
     vx, vy, vz = v_air_body
     speed = (vx * vx + vy * vy + vz * vz) ** 0.5
     q = -0.5 * params.air_density_kg_m3 * params.drag_coefficient * speed
