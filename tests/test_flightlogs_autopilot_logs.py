@@ -222,10 +222,11 @@ DF_FORMATS = {  # name: (type, format characters, columns), as ArduCopter 4 logs
 }
 
 
-def _df_record(name: str, *values: object) -> bytes:
+def df_record(name: str, *values: object, formats: dict = DF_FORMATS) -> bytes:
+    """One record of message `name` as `formats` lays it out."""
     from pymavlink.DFReader import FORMAT_TO_STRUCT
 
-    kind, chars, _ = DF_FORMATS[name]
+    kind, chars, _ = formats[name]
     packed = []
     for c, v in zip(chars, values, strict=True):
         scale = FORMAT_TO_STRUCT[c][1]
@@ -236,34 +237,40 @@ def _df_record(name: str, *values: object) -> bytes:
     return bytes([0xA3, 0x95, kind]) + body
 
 
+def df_formats(formats: dict) -> bytes:
+    """The FMT records (type 128, 89 bytes) that declare `formats`."""
+    from pymavlink.DFReader import FORMAT_TO_STRUCT
+
+    out = b""
+    for name, (kind, chars, cols) in formats.items():
+        length = 3 + struct.calcsize("<" + "".join(FORMAT_TO_STRUCT[c][0] for c in chars))
+        out += bytes([0xA3, 0x95, 0x80]) + struct.pack(
+            "<BB4s16s64s", kind, length, name.encode(), chars.encode(), cols.encode()
+        )
+    return out
+
+
 def write_dataflash(
     path: Path, log: FlightLog, *, attitude: bool = True, vehicle_text: str = "ArduCopter V4.5.7"
 ) -> Path:
     """A DataFlash log of `log`: an FMT record per message type (type 128, 89 bytes), then
     PARM, MSG and the messages at TimeUS."""
-    from pymavlink.DFReader import FORMAT_TO_STRUCT
-
-    out = bytearray()
-    for name, (kind, chars, cols) in DF_FORMATS.items():
-        length = 3 + struct.calcsize("<" + "".join(FORMAT_TO_STRUCT[c][0] for c in chars))
-        out += bytes([0xA3, 0x95, 0x80]) + struct.pack(
-            "<BB4s16s64s", kind, length, name.encode(), chars.encode(), cols.encode()
-        )
+    out = bytearray(df_formats(DF_FORMATS))
     t0 = round((log.time_s[0] - 0.1) * 1e6)
-    out += _df_record("MSG", t0, vehicle_text)
+    out += df_record("MSG", t0, vehicle_text)
     for name, value in AC_PARAMS.items():
-        out += _df_record("PARM", t0, name, value)
+        out += df_record("PARM", t0, name, value)
     a = ned_frd(log)
     pwm = arducopter_pwm(log.rotor_speeds_rad_s, AC_PARAMS)[:, [3, 1, 0, 2]]
     for k, t in enumerate(log.time_s):
         us = round(t * 1e6)
         roll, pitch, yaw = np.degrees(a["euler"][k])
         if attitude:
-            out += _df_record("ATT", us, 0.0, roll, 0.0, pitch, 0.0, yaw % 360.0)
-        out += _df_record("IMU", us, 0, *a["rates"][k], *a["specific_force"][k])
-        out += _df_record("XKF1", us, 0, *a["vel"][k], *a["pos"][k])
-        out += _df_record("RCOU", us, *(round(p) for p in pwm[k]), 0, 0, 0, 0)
-        out += _df_record("BAT", us, 0, 11.1)
+            out += df_record("ATT", us, 0.0, roll, 0.0, pitch, 0.0, yaw % 360.0)
+        out += df_record("IMU", us, 0, *a["rates"][k], *a["specific_force"][k])
+        out += df_record("XKF1", us, 0, *a["vel"][k], *a["pos"][k])
+        out += df_record("RCOU", us, *(round(p) for p in pwm[k]), 0, 0, 0, 0)
+        out += df_record("BAT", us, 0, 11.1)
     path.write_bytes(bytes(out))
     return path
 

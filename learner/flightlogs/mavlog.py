@@ -2,10 +2,11 @@
 through pymavlink.
 
 DataFlash: ATT (degrees, NED/FRD Euler Z-Y-X), IMU (first instance: gyro, body FRD specific
-force), XKF1/NKF1 (core 0: PN PE PD VN VE VD), else POS (latitude, longitude, altitude about
-the first fix; velocity differentiated), ESC RPM (instances 0..3) where logged, else RCOU
-through ArduCopter's thrust curve, BAT (else CURR) Volt, RFND Dist, PARM for the parameters.
-Times are TimeUS.
+force), XKF1/NKF1/EKF1 (core 0: PN PE PD VN VE VD), else POS (latitude, longitude, altitude
+about the first fix; velocity differentiated), ESC RPM (instances 0..3) where logged, else
+RCOU (C1.., Ch1.. or Chan1.. by the log's age) through ArduCopter's thrust curve, BAT (else
+CURR) Volt, RFND Dist, PARM for the parameters. Times are TimeUS, or TimeMS in the logs of
+ArduCopter 3.3 and before (GPS: T).
 
 Telemetry: ATTITUDE_QUATERNION else ATTITUDE, LOCAL_POSITION_NED, HIGHRES_IMU else SCALED_IMU
 else (ArduPilot) RAW_IMU, ESC_TELEMETRY_1_TO_4 or ESC_STATUS rpm, else SERVO_OUTPUT_RAW (port
@@ -14,11 +15,7 @@ else (ArduPilot) RAW_IMU, ESC_TELEMETRY_1_TO_4 or ESC_STATUS rpm, else SERVO_OUT
 vehicle's HEARTBEAT. Times are the vehicle's boot time where a message carries it, else the
 log's receive time shifted by the median offset between the two.
 
-ArduCopter's thrust curve (AP_MotorsMulticopter): a = (pwm - MOT_PWM_MIN) / (MOT_PWM_MAX -
-MOT_PWM_MIN), r = (a - MOT_SPIN_MIN) / (MOT_SPIN_MAX - MOT_SPIN_MIN) clipped to 0..1, thrust
-fraction = (1 - MOT_THST_EXPO) r + MOT_THST_EXPO r^2 (the inverse of its linearisation; the
-battery voltage scaling is left out, lift_max = 1), per rotor thrust = weight/4 x fraction /
-MOT_THST_HOVER (the learnt hover thrust, in the same units).
+ArduCopter's thrust curve, either generation's parameters: `learner.flightlogs.arducopter`.
 """
 
 from __future__ import annotations
@@ -31,6 +28,15 @@ from typing import Any
 import numpy as np
 
 from learner.flightlogs.actuators import ActuatorModel
+from learner.flightlogs.arducopter import (
+    arducopter_thrust,
+    ardupilot_type,
+    frame_class,
+    winged_warning,
+)
+from learner.flightlogs.arducopter import (
+    motor_channels as ap_motor_channels,
+)
 from learner.flightlogs.flightlog import FlightLog
 from learner.flightlogs.resample import QUAD_X_TO_OURS, AutopilotLog, Stream, stream, to_flightlog
 from learner.flightlogs.ulog import motor_channels, px4_pwm_thrust
@@ -38,16 +44,10 @@ from simbridge.config import ConfigError
 from simbridge.frames import geodetic_to_local, quat_from_euler
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
-# ArduCopter's defaults, used where the log has no PARM for them (and said so in the meta)
-AC_DEFAULTS = {"MOT_PWM_MIN": 1000.0, "MOT_PWM_MAX": 2000.0, "MOT_SPIN_MIN": 0.15,
-               "MOT_SPIN_MAX": 0.95, "MOT_THST_EXPO": 0.65, "MOT_THST_HOVER": 0.35}  # fmt: skip
-AP_MOTOR_FUNCTION = 33  # SERVOn_FUNCTION: 33 = Motor 1, 34 = Motor 2, ...
 # MAV_TYPE
 QUADROTOR = 2
 OTHER_MULTIROTORS = {3: "coaxial helicopter", 4: "helicopter", 13: "hexarotor", 14: "octorotor",
                      15: "tricopter"}  # fmt: skip
-AP_FRAME_CLASSES = {2: "hexarotor", 3: "octorotor", 4: "octaquad", 5: "Y6", 6: "helicopter",
-                    7: "tricopter", 8: "single copter", 9: "coax copter"}  # fmt: skip
 MAV_AUTOPILOT_PX4, MAV_AUTOPILOT_INVALID = 12, 8
 MG_TO_M_S2 = GRAVITY_M_S2 / 1000.0
 DOWNWARD = 25  # MAV_SENSOR_ROTATION_PITCH_270
@@ -93,7 +93,7 @@ def decode_dataflash(path: Path) -> AutopilotLog:
         conn = DFReader.DFReader_binary(str(path))
     except Exception as err:
         raise ConfigError(f"{path}: not a readable ArduPilot DataFlash log ({err})") from None
-    by: dict[str, list[Any]] = defaultdict(list)
+    by: dict[str, list[tuple[float, Any]]] = defaultdict(list)
     texts = []
     params: dict[str, float] = {}
     for m in _messages(conn, path, "ArduPilot DataFlash log"):
@@ -102,20 +102,23 @@ def decode_dataflash(path: Path) -> AutopilotLog:
             params[m.Name] = float(m.Value)
         elif t == "MSG":
             texts.append(str(m.Message))
-        elif t != "FMT" and hasattr(m, "TimeUS"):
-            by[t].append(m)
+        elif t != "FMT" and (boot_s := _dataflash_boot_s(m)) is not None:
+            by[t].append((boot_s, m))
     found = [f"{k} ({len(v)})" for k, v in sorted(by.items())] + [f"PARM ({len(params)})"]
-    looked = {"position": "XKF1, NKF1 or POS", "attitude": "ATT",
+    looked = {"position": "XKF1, NKF1, EKF1 or POS", "attitude": "ATT",
               "actuator outputs": "ESC RPM (instances 0..3) or RCOU C1..C4"}  # fmt: skip
     log = AutopilotLog(path, "ArduPilot DataFlash log", found, looked)
-    log.meta["autopilot"] = next((x for x in texts if x.startswith("Ardu")), "ArduPilot")
-    _ardupilot_type(log, params, " ".join(texts))
+    log.meta["autopilot"] = next(
+        (x for x in texts if x.startswith(("Ardu", "APM:Copter"))), "ArduPilot"
+    )
+    ardupilot_type(log, params, texts)
 
     def series(name: str, fields: list[str], scale: float = 1.0, **match: int) -> Stream | None:
-        rows = [m for m in by.get(name, []) if all(getattr(m, k, v) == v for k, v in match.items())]
-        t = [m.TimeUS * 1e-6 for m in rows]
+        rows = [(t, m) for t, m in by.get(name, [])
+                if all(getattr(m, k, v) == v for k, v in match.items())]  # fmt: skip
         src = f"{name}.{','.join(fields)}" + "".join(f" {k}={v}" for k, v in match.items())
-        return stream(t, [[getattr(m, f) * scale for f in fields] for m in rows], src)
+        return stream([t for t, _ in rows], [[getattr(m, f) * scale for f in fields]
+                                             for _, m in rows], src)  # fmt: skip
 
     att = series("ATT", ["Roll", "Pitch", "Yaw"], math.pi / 180.0)
     if att is not None:
@@ -124,7 +127,8 @@ def decode_dataflash(path: Path) -> AutopilotLog:
     log.rates_frd_rad_s = series("IMU", ["GyrX", "GyrY", "GyrZ"], I=0)
     log.acceleration = series("IMU", ["AccX", "AccY", "AccZ"], I=0)
     log.acceleration_frame = "frd_specific_force"
-    for ekf in ("XKF1", "NKF1"):
+    # the EKF's core 0: XKF1 (EKF3), NKF1 (EKF2), EKF1 (ArduCopter 3.3's EKF, one core)
+    for ekf in ("XKF1", "NKF1", "EKF1"):
         log.position_ned_m = series(ekf, ["PN", "PE", "PD"], C=0)
         log.velocity_ned_m_s = series(ekf, ["VN", "VE", "VD"], C=0)
         if log.position_ned_m is not None:
@@ -141,14 +145,49 @@ def decode_dataflash(path: Path) -> AutopilotLog:
         log.actuator_model = ActuatorModel("rotor_speed", "rpm")
         log.actuator_note = "ESC rpm (instance i = motor i + 1, quad X order)"
     else:
-        channels = _ap_motor_channels(log, params)
-        rcou = series("RCOU", [f"C{c + 1}" for c in channels])
-        log.actuators, log.actuator_model, log.actuator_note = _arducopter_thrust(
+        channels = ap_motor_channels(log, params)
+        rcou = next(
+            (
+                s
+                for prefix in ("C", "Ch", "Chan")  # ArduCopter 3.4 on, 3.3, before
+                if (s := _if_fields(by, "RCOU", [f"{prefix}{c + 1}" for c in channels], series))
+            ),
+            None,
+        )
+        log.actuators, log.actuator_model, log.actuator_note = arducopter_thrust(
             log, _ours(rcou), params
         )
-    log.battery_v = series("BAT", ["Volt"], Instance=0) or series("CURR", ["Volt"])
+    log.battery_v = series("BAT", ["Volt"], Instance=0) or _volts(by, series)
     log.range_m = series("RFND", ["Dist"], Instance=0)
     return log
+
+
+def _dataflash_boot_s(m: Any) -> float | None:
+    """A DataFlash message's time since boot: TimeUS (ArduPilot 3.4 on), else TimeMS (before;
+    GPS's TimeMS is then its week's time, and T the boot time)."""
+    if hasattr(m, "TimeUS"):
+        return m.TimeUS * 1e-6
+    if m.get_type() == "GPS":
+        return m.T * 1e-3 if hasattr(m, "T") else None
+    return m.TimeMS * 1e-3 if hasattr(m, "TimeMS") else None
+
+
+def _if_fields(by: dict[str, list[tuple[float, Any]]], name: str, fields: list[str],
+               series: Any) -> Stream | None:  # fmt: skip
+    rows = by.get(name)
+    if not rows or not all(hasattr(rows[0][1], f) for f in fields):
+        return None
+    return series(name, fields)
+
+
+def _volts(by: dict[str, list[tuple[float, Any]]], series: Any) -> Stream | None:
+    """CURR's Volt: volts in a float field, centivolts in an integer one (ArduCopter 3.3)."""
+    rows = by.get("CURR")
+    if not rows or not hasattr(rows[0][1], "Volt"):
+        return None
+    m = rows[0][1]
+    kind = m.fmt.format[m.fmt.columns.index("Volt")]
+    return series("CURR", ["Volt"], 0.01 if kind in "bBhHiI" else 1.0)
 
 
 def decode_tlog(path: Path) -> AutopilotLog:
@@ -215,7 +254,7 @@ def decode_tlog(path: Path) -> AutopilotLog:
         log.actuator_note = "ESC rpm (ESC i = motor i + 1, quad X order)"
     else:
         channels = (
-            (motor_channels(params) or [0, 1, 2, 3]) if px4 else _ap_motor_channels(log, params)
+            (motor_channels(params) or [0, 1, 2, 3]) if px4 else ap_motor_channels(log, params)
         )
         servo = _ours(series("SERVO_OUTPUT_RAW", [f"servo{c + 1}_raw" for c in channels], port=0))
         if px4:
@@ -227,7 +266,7 @@ def decode_tlog(path: Path) -> AutopilotLog:
             )
             log.actuator_note = f"SERVO_OUTPUT_RAW {note}"
         else:
-            log.actuators, log.actuator_model, log.actuator_note = _arducopter_thrust(
+            log.actuators, log.actuator_model, log.actuator_note = arducopter_thrust(
                 log, servo, params
             )
     sys_v = series("SYS_STATUS", ["voltage_battery"], 1e-3)
@@ -289,79 +328,10 @@ def _ours(s: Stream | None) -> Stream | None:
     return None if s is None else Stream(s.t_s, s.values[:, QUAD_X_TO_OURS], s.source)
 
 
-def _ap_motor_channels(log: AutopilotLog, params: dict[str, float]) -> list[int]:
-    """The outputs of motors 1..4 by SERVOn_FUNCTION 33..36; ArduCopter's default 1..4 for a
-    copter whose log has none; a plane without them has no four motors."""
-    funcs = {
-        int(v): int(k[5:-9]) - 1
-        for k, v in params.items()
-        if k.startswith("SERVO") and k.endswith("_FUNCTION") and k[5:-9].isdigit()
-    }
-    motors = [funcs.get(AP_MOTOR_FUNCTION + i) for i in range(4)]
-    if None not in motors:
-        return [int(c) for c in motors if c is not None]
-    if "warning_vehicle" in log.meta:
-        found = ", ".join(f"motor {f - 32} on SERVO{c + 1}" for f, c in sorted(funcs.items())
-                          if 33 <= f <= 40)  # fmt: skip
-        raise ConfigError(
-            f"{log.path}: a {log.meta['warning_vehicle']} log without four motor outputs "
-            f"(SERVOn_FUNCTION 33..36 for motors 1..4; found: {found or 'none'}): not converted"
-        )
-    return [0, 1, 2, 3]
-
-
-def _arducopter_thrust(
-    log: AutopilotLog, pwm: Stream | None, params: dict[str, float]
-) -> tuple[Stream | None, ActuatorModel, str]:
-    p = {k: params.get(k, d) for k, d in AC_DEFAULTS.items()}
-    if p["MOT_PWM_MAX"] <= p["MOT_PWM_MIN"]:  # 0, 0: ArduCopter takes the throttle channel's
-        p["MOT_PWM_MIN"] = params.get("RC3_MIN", 1000.0)
-        p["MOT_PWM_MAX"] = params.get("RC3_MAX", 2000.0)
-    assumed = sorted(k for k in AC_DEFAULTS if k not in params)
-    if assumed:
-        log.notes.append(f"warning: not in the log, ArduCopter's defaults assumed: {assumed}")
-    expo, hover = p["MOT_THST_EXPO"], p["MOT_THST_HOVER"]
-    note = (
-        f"RCOU/SERVO_OUTPUT_RAW PWM through ArduCopter's thrust curve: a = (pwm - "
-        f"{p['MOT_PWM_MIN']:g}) / ({p['MOT_PWM_MAX']:g} - {p['MOT_PWM_MIN']:g}), r = (a - "
-        f"{p['MOT_SPIN_MIN']:g}) / ({p['MOT_SPIN_MAX']:g} - {p['MOT_SPIN_MIN']:g}) in 0..1, "
-        f"fraction = {1 - expo:g} r + {expo:g} r^2 (MOT_THST_EXPO; no voltage scaling), per "
-        f"rotor weight/4 x fraction / MOT_THST_HOVER {hover:g}"
-    )
-    model = ActuatorModel("throttle", hover_throttle=hover)
-    if pwm is None:
-        return None, model, note
-    a = (pwm.values - p["MOT_PWM_MIN"]) / (p["MOT_PWM_MAX"] - p["MOT_PWM_MIN"])
-    r = np.clip((a - p["MOT_SPIN_MIN"]) / (p["MOT_SPIN_MAX"] - p["MOT_SPIN_MIN"]), 0.0, 1.0)
-    return Stream(pwm.t_s, (1.0 - expo) * r + expo * r * r, pwm.source), model, note
-
-
-def _ap_frame_class(log: AutopilotLog, params: dict[str, float]) -> None:
-    for key in ("FRAME_CLASS", "Q_FRAME_CLASS"):  # a copter's, a quadplane's lift motors
-        frame_class = int(params.get(key, 1))
-        if frame_class in AP_FRAME_CLASSES:
-            raise ConfigError(
-                f"{log.path}: a {AP_FRAME_CLASSES[frame_class]} ({key} {frame_class}); the "
-                f"diagnosis models a quadrotor's four rotors: not converted"
-            )
-
-
-def _ardupilot_type(log: AutopilotLog, params: dict[str, float], text: str) -> None:
-    _ap_frame_class(log, params)
-    if "ArduPlane" in text or "Q_ENABLE" in params:
-        kind = "VTOL (quadplane)" if params.get("Q_ENABLE", 0) else "fixed-wing"
-        log.meta["warning_vehicle"] = kind
-        log.notes.append(_winged_warning(kind, "ArduPlane"))
-    elif int(params.get("FRAME_TYPE", 1)) != 1:
-        log.notes.append(
-            f"warning: FRAME_TYPE {int(params['FRAME_TYPE'])} is not X: motors read in X order"
-        )
-
-
 def _mav_type(log: AutopilotLog, mav_type: int, params: dict[str, float], px4: bool) -> None:
     log.meta["mav_type"] = mav_type
     if not px4:
-        _ap_frame_class(log, params)
+        frame_class(log, params)
     if mav_type in OTHER_MULTIROTORS:
         raise ConfigError(
             f"{log.path}: a {OTHER_MULTIROTORS[mav_type]} (HEARTBEAT type {mav_type}); the "
@@ -370,11 +340,4 @@ def _mav_type(log: AutopilotLog, mav_type: int, params: dict[str, float], px4: b
     if mav_type != QUADROTOR:
         kind = "fixed-wing" if mav_type == 1 else f"MAV_TYPE {mav_type}"
         log.meta["warning_vehicle"] = kind
-        log.notes.append(_winged_warning(kind, "PX4" if px4 else "ArduPilot"))
-
-
-def _winged_warning(kind: str, autopilot: str) -> str:
-    return (
-        f"warning: a {kind} {autopilot} log, not a quadrotor's: its four motors are read as a "
-        f"quad X's rotors; wing and control-surface forces are not modelled"
-    )
+        log.notes.append(winged_warning(kind, "PX4" if px4 else "ArduPilot"))

@@ -189,14 +189,28 @@ def crashing(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
     return out
 
 
-# Rotors stopped (their nominal thrust below this share of the weight) and the body at rest
-# (speed and kinematic acceleration below these) for at least HELD_S: something holds it up
-# (the ground under a log whose heights are off, a stand, a hand). A rotor coasting in the
-# air after a cut leaves the body falling within a fraction of this time.
+# Rotors stopped (their nominal thrust below this share of the weight) and the body not
+# accelerating (its kinematic acceleration below a quarter of g: the accelerometer reads the
+# weight held up) for at least HELD_S: something holds it up (the ground under a log whose
+# heights are off, a stand, a hand). In the air such a body falls: only drag could hold it,
+# and below half its terminal speed drag carries at most a quarter of the weight, so the
+# speed need only be below that (`held_speed_limit_m_s`), not at rest: an outdoor estimator's
+# velocity wanders by a metre per second on the ground.
 HELD_THRUST_SHARE = 0.05
-HELD_SPEED_M_S = 0.1
 HELD_ACCELERATION_M_S2 = 0.25 * GRAVITY_M_S2
 HELD_S = 0.5
+SEA_LEVEL_AIR_DENSITY_KG_M3 = 1.225
+DISC_DRAG_COEFFICIENT = 1.4  # the rotor discs broadside to the flow: the most drag they give
+
+
+def held_speed_limit_m_s(vehicle: Vehicle) -> float:
+    """Half the lowest terminal speed the vehicle could fall at with its rotors stopped (its
+    four rotor discs as the drag area)."""
+    area_m2 = 4 * np.pi * vehicle.rotor_radius_m**2  # a quadrotor
+    terminal = np.sqrt(
+        2.0 * vehicle.weight_n / (SEA_LEVEL_AIR_DENSITY_KG_M3 * DISC_DRAG_COEFFICIENT * area_m2)
+    )
+    return 0.5 * float(terminal)
 
 
 def held_up(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
@@ -210,7 +224,7 @@ def held_up(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
     a = _kinematic_acceleration(log)
     candidate = (
         (thrust_n < HELD_THRUST_SHARE * vehicle.mass_kg * GRAVITY_M_S2)
-        & (np.linalg.norm(log.velocity_m_s, axis=1) < HELD_SPEED_M_S)
+        & (np.linalg.norm(log.velocity_m_s, axis=1) < held_speed_limit_m_s(vehicle))
         & (np.linalg.norm(a, axis=1) < HELD_ACCELERATION_M_S2)
     )
     # runs of candidate rows lasting HELD_S
@@ -296,8 +310,8 @@ def describe_left_out(counts: dict) -> str:
     if counts.get("held_rows"):
         parts.append(
             f"{counts['held_rows']} rows standing with the rotors stopped (their thrust below "
-            f"{HELD_THRUST_SHARE:.0%} of the weight, at rest for {HELD_S:g} s or more: on the "
-            f"ground, or held)"
+            f"{HELD_THRUST_SHARE:.0%} of the weight, not falling for {HELD_S:g} s or more: on "
+            f"the ground, or held)"
         )
     if counts.get("crash_rows"):
         parts.append(
