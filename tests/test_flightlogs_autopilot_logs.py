@@ -22,6 +22,7 @@ from simbridge.frames import (
     enu_to_ned,
     euler_from_quat,
     flu_to_frd,
+    local_to_geodetic,
     quat_conjugate,
     quat_enu_flu_to_ned_frd,
     quat_from_euler,
@@ -38,6 +39,7 @@ AC_PARAMS = {"MOT_PWM_MIN": 1100.0, "MOT_PWM_MAX": 1900.0, "MOT_SPIN_MIN": 0.12,
              "MOT_SPIN_MAX": 0.95, "MOT_THST_EXPO": 0.55, "MOT_THST_HOVER": 0.3}  # fmt: skip
 G_UP = np.array([0.0, 0.0, GRAVITY_M_S2])
 BOOT_EPOCH_S = 1.7e9  # the tlog's receive clock at the vehicle's boot
+LAT0_DEG, LON0_DEG = -35.3632, 149.1652  # CMAC, where ArduPilot flies its tests
 
 
 def known_flight(seconds: float = 8.0, rate_hz: float = 50.0, phase: float = 0.0) -> FlightLog:
@@ -124,7 +126,7 @@ def write_tlog(
     params: dict[str, float] | None = None,
     esc: bool = False,
     servo: bool = True,
-    position: bool = True,
+    position: bool | str = True,
     motor_outputs: tuple[int, ...] = (1, 2, 3, 4),
     hole_s: tuple[float, float] | None = None,
 ) -> Path:
@@ -151,7 +153,14 @@ def write_tlog(
         if hole_s and hole_s[0] < t < hole_s[1]:
             continue
         send(t, mav.attitude_encode(ms, *a["euler"][k], *a["rates"][k]))
-        if position:
+        if position == "global":  # degE7 about an origin, mm, cm/s
+            n, e, d = a["pos"][k]
+            lat, lon = local_to_geodetic(LAT0_DEG, LON0_DEG, e, n)
+            vn, ve, vd = (round(100 * v) for v in a["vel"][k])
+            send(t, mav.global_position_int_encode(ms, round(lat * 1e7), round(lon * 1e7),
+                                                   round(1e3 * (584.0 - d)), round(-1e3 * d),
+                                                   vn, ve, vd, 0))  # fmt: skip
+        elif position:
             send(t, mav.local_position_ned_encode(ms, *a["pos"][k], *a["vel"][k]))
         f, g = a["specific_force"][k], a["rates"][k]
         send(t, mav.highres_imu_encode(round(t * 1e6), *f, *g, 0, 0, 0, 0, 0, 0, 0, 0x3F))
@@ -179,6 +188,24 @@ def test_tlog_round_trip_through_arducopters_thrust_curve(tmp_path: Path) -> Non
     assert "ArduCopter's thrust curve" in notes and "MOT_THST_HOVER 0.3" in notes
     assert "timeline: uniform 50.0 Hz" in notes and "0 rows dropped" in notes
     assert back.meta["sources"]["acceleration"] == "HIGHRES_IMU.xacc,yacc,zacc"
+
+
+def test_tlog_without_a_local_frame_reads_the_global_position(tmp_path: Path) -> None:
+    """A vehicle that streams GLOBAL_POSITION_INT and no LOCAL_POSITION_NED (ArduPlane 3.8's
+    default streams, ArduCopter before its EKF origin is set): the position about the first
+    fix and the height above home, to the message's resolution (degE7 is 11 mm, velocity
+    cm/s)."""
+    log = known_flight()
+    back = read_log(write_tlog(tmp_path / "global.tlog", log, position="global"))
+
+    def at(a: np.ndarray) -> np.ndarray:
+        return np.column_stack([np.interp(back.time_s, log.time_s, c) for c in a.T])
+
+    start = np.array([*log.position_m[0, :2], 0.0])  # horizontally; up: above home
+    np.testing.assert_allclose(back.position_m, at(log.position_m) - start, atol=0.015)
+    np.testing.assert_allclose(back.velocity_m_s, at(log.velocity_m_s), atol=0.006)
+    np.testing.assert_allclose(back.rotor_speeds_rad_s, at(log.rotor_speeds_rad_s), rtol=3e-3)
+    assert back.meta["sources"]["position"].startswith("GLOBAL_POSITION_INT.lat,lon about")
 
 
 def test_tlog_esc_rpm_preferred_to_the_outputs(tmp_path: Path) -> None:
@@ -324,9 +351,9 @@ def test_ulog_fixture_end_to_end() -> None:
 def test_refuses_a_log_without_position(tmp_path: Path) -> None:
     path = write_tlog(tmp_path / "nopos.tlog", known_flight(2.0), position=False)
     message = "nopos.tlog: this MAVLink telemetry log has no position (looked for "
-    with pytest.raises(
-        ConfigError, match=re.escape(message + "LOCAL_POSITION_NED); the log has: ATT")
-    ):
+    with pytest.raises(ConfigError, match=re.escape(
+        message + "LOCAL_POSITION_NED or GLOBAL_POSITION_INT); the log has: ATT"
+    )):  # fmt: skip
         read_log(path)
 
 

@@ -8,7 +8,8 @@ RCOU (C1.., Ch1.. or Chan1.. by the log's age) through ArduCopter's thrust curve
 CURR) Volt, RFND Dist, PARM for the parameters. Times are TimeUS, or TimeMS in the logs of
 ArduCopter 3.3 and before (GPS: T).
 
-Telemetry: ATTITUDE_QUATERNION else ATTITUDE, LOCAL_POSITION_NED, HIGHRES_IMU else SCALED_IMU
+Telemetry: ATTITUDE_QUATERNION else ATTITUDE, LOCAL_POSITION_NED (else GLOBAL_POSITION_INT
+about the first fix, relative altitude), HIGHRES_IMU else SCALED_IMU
 else (ArduPilot) RAW_IMU, ESC_TELEMETRY_1_TO_4 or ESC_STATUS rpm, else SERVO_OUTPUT_RAW (port
 0) through the autopilot's thrust curve, SYS_STATUS else BATTERY_STATUS, DISTANCE_SENSOR
 (downward), PARAM_VALUE; the autopilot (PX4 or ArduPilot) and vehicle type from the
@@ -214,7 +215,7 @@ def decode_tlog(path: Path) -> AutopilotLog:
             by[m.get_type()].append(m)
     found = [f"{k} ({len(v)})" for k, v in sorted(by.items())] + [f"PARAM_VALUE ({len(params)})"]
     looked = {
-        "position": "LOCAL_POSITION_NED",
+        "position": "LOCAL_POSITION_NED or GLOBAL_POSITION_INT",
         "attitude": "ATTITUDE_QUATERNION or ATTITUDE",
         "actuator outputs": "ESC_TELEMETRY_1_TO_4, ESC_STATUS or SERVO_OUTPUT_RAW",
     }
@@ -240,6 +241,16 @@ def decode_tlog(path: Path) -> AutopilotLog:
     log.rates_frd_rad_s = series("ATTITUDE", ["rollspeed", "pitchspeed", "yawspeed"])
     log.position_ned_m = series("LOCAL_POSITION_NED", ["x", "y", "z"])
     log.velocity_ned_m_s = series("LOCAL_POSITION_NED", ["vx", "vy", "vz"])
+    fix = series("GLOBAL_POSITION_INT", ["lat", "lon", "relative_alt"], 1.0)
+    if log.position_ned_m is None and fix is not None:  # streamed without a local frame
+        lat0, lon0 = fix.values[0, 0] * 1e-7, fix.values[0, 1] * 1e-7
+        en = np.array([geodetic_to_local(lat0, lon0, la * 1e-7, lo * 1e-7)
+                       for la, lo, _ in fix.values])  # fmt: skip
+        ned = np.column_stack([en[:, 1], en[:, 0], -fix.values[:, 2] * 1e-3])
+        log.position_ned_m = Stream(
+            fix.t_s, ned, "GLOBAL_POSITION_INT.lat,lon about the first fix,relative_alt"
+        )
+        log.velocity_ned_m_s = series("GLOBAL_POSITION_INT", ["vx", "vy", "vz"], 0.01)
     acc = ["xacc", "yacc", "zacc"]
     log.acceleration = series("HIGHRES_IMU", acc) or series("SCALED_IMU", acc, MG_TO_M_S2)
     if log.acceleration is None and not px4:  # ArduPilot's RAW_IMU carries milli-g too
