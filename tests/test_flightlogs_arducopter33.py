@@ -3,8 +3,8 @@ log171.bin, flown at CMAC): times in TimeMS, the EKF's core in EKF1, motor outpu
 Ch1..Ch4, the battery in centivolts, the motor parameters under their old names (THR_MIN,
 THR_MID, MOT_THST_MAX, RC3_MIN/MAX). Written here from a known flight, the motor PWM through
 ArduCopter 3.3's own output stage (AP_MotorsMulticopter::apply_thrust_curve_and_volt_scaling),
-and read back to its positions, attitude and rotor speeds; a hexarotor's firmware, named in
-its start-up text, is refused."""
+and read back to its positions, attitude and rotor speeds, as binary and as the text Mission
+Planner writes (`.log`); a hexarotor's firmware, named in its start-up text, is refused."""
 
 from __future__ import annotations
 
@@ -100,6 +100,32 @@ def test_an_arducopter_33_log_reads_back_to_its_flight(tmp_path: Path) -> None:
     notes = "\n".join(back.meta["conversions"])
     assert "ArduCopter 3.3's motor parameters: THR_MIN 120, THR_MID 420" in notes
     assert "not in the log" not in notes
+
+
+def as_text(binary: Path, text: Path) -> Path:
+    """The log as Mission Planner writes it as text: 'NAME, v1, v2, ...' lines."""
+    from pymavlink import DFReader
+
+    reader = DFReader.DFReader_binary(str(binary))
+    lines = []
+    while (m := reader.recv_msg()) is not None:
+        if m.get_type() == "FMT":
+            lines.append(f"FMT, {m.Type}, {m.Length}, {m.Name}, {m.Format}, {m.Columns}")
+        else:
+            lines.append(", ".join([m.get_type(), *(str(getattr(m, c)) for c in m.fmt.columns)]))
+    text.write_text("\n".join(lines) + "\n")
+    return text
+
+
+def test_a_dataflash_log_as_text_reads_as_the_binary_one(tmp_path: Path) -> None:
+    binary = write_dataflash_33(tmp_path / "log171.bin", known_flight(3.0))
+    from_text = read_log(as_text(binary, tmp_path / "log171.log"))  # sniffed: FMT first
+    from_binary = read_log(binary)
+    np.testing.assert_array_equal(from_text.time_s, from_binary.time_s)
+    np.testing.assert_allclose(from_text.position_m, from_binary.position_m, atol=1e-6)
+    np.testing.assert_allclose(from_text.quaternion, from_binary.quaternion, atol=1e-6)
+    np.testing.assert_allclose(from_text.rotor_speeds_rad_s, from_binary.rotor_speeds_rad_s,
+                               rtol=1e-6)  # fmt: skip
 
 
 def test_an_arducopter_33_hexarotor_is_refused(tmp_path: Path) -> None:

@@ -1,5 +1,5 @@
-"""ArduPilot DataFlash logs (`.bin`) and MAVLink telemetry logs (`.tlog`) into a `FlightLog`
-through pymavlink.
+"""ArduPilot DataFlash logs (`.bin`, or as text: Mission Planner's `.log`) and MAVLink
+telemetry logs (`.tlog`) into a `FlightLog` through pymavlink.
 
 DataFlash: ATT (degrees, NED/FRD Euler Z-Y-X), IMU (first instance: gyro, body FRD specific
 force), XKF1/NKF1/EKF1 (core 0: PN PE PD VN VE VD), else POS (latitude, longitude, altitude
@@ -90,8 +90,12 @@ def decode_dataflash(path: Path) -> AutopilotLog:
     """A DataFlash log's messages as streams in ArduPilot's frames."""
     from pymavlink import DFReader
 
+    from learner.flightlogs.readers import is_dataflash_text
+
+    with path.open("rb") as f:
+        text = is_dataflash_text(f.read(64))
     try:
-        conn = DFReader.DFReader_binary(str(path))
+        conn = (DFReader.DFReader_text if text else DFReader.DFReader_binary)(str(path))
     except Exception as err:
         raise ConfigError(f"{path}: not a readable ArduPilot DataFlash log ({err})") from None
     by: dict[str, list[tuple[float, Any]]] = defaultdict(list)

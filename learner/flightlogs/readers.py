@@ -45,6 +45,12 @@ def _is_cfusd(head: bytes) -> bool:
     return looks_like_cfusd(head)
 
 
+def is_dataflash_text(head: bytes) -> bool:
+    """An ArduPilot DataFlash log as text (Mission Planner's `.log`): its first line declares
+    the FMT message."""
+    return head.lstrip().startswith(b"FMT,")
+
+
 def _is_csv(head: bytes) -> bool:
     """Text whose first line that is not a comment has a comma: a CSV under another suffix."""
     if b"\x00" in head:
@@ -71,6 +77,11 @@ READERS: dict[str, Reader] = {
 # For suffixes not in READERS, in order: (what it is, test on the first 4 KiB, reader).
 SNIFFERS: list[tuple[str, Callable[[bytes], bool], Reader]] = [
     ("Crazyflie microSD log", _is_cfusd, _cfusd),
+    (
+        "ArduPilot DataFlash text log",
+        is_dataflash_text,
+        _autopilot("learner.flightlogs.mavlog", "read_dataflash"),
+    ),
     ("CSV", _is_csv, read_table_log),
 ]
 
