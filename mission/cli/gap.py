@@ -20,7 +20,7 @@ def add_parser(sub: Any) -> None:
     d = g.add_parser("diagnose", help="residuals, effects and a corrected world from flight logs")
     d.add_argument(
         "logs", type=Path, nargs="+",
-        help="flight logs (.csv, .parquet, .rrd, .ulg, .bin, .tlog, Crazyflie microSD)",
+        help="flight logs (.csv, .parquet, .rrd, .ulg, .bin, .log, .tlog, Crazyflie microSD)",
     )  # fmt: skip
     d.add_argument("--world", required=True, help="the nominal world (YAML or packaged name)")
     d.add_argument("--holdout", type=Path, nargs="+", default=[], help="logs to score only")
@@ -51,7 +51,7 @@ def add_parser(sub: Any) -> None:
     c = g.add_parser("convert", help="write any readable flight log in our format")
     c.add_argument(
         "log", type=Path,
-        help="flight log (.csv, .parquet, .rrd, .ulg, .bin, .tlog, Crazyflie microSD)",
+        help="flight log (.csv, .parquet, .rrd, .ulg, .bin, .log, .tlog, Crazyflie microSD)",
     )  # fmt: skip
     c.add_argument("out", type=Path, help="our format: .csv (with a .json sidecar) or .parquet")
     c.add_argument(
