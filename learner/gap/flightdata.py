@@ -195,8 +195,13 @@ def crashing(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
 # heights are off, a stand, a hand). In the air such a body falls: only drag could hold it,
 # and below half its terminal speed drag carries at most a quarter of the weight, so the
 # speed need only be below that (`held_speed_limit_m_s`), not at rest: an outdoor estimator's
-# velocity wanders by a metre per second on the ground.
+# velocity wanders by a metre per second on the ground. That holds where the log's rotors
+# carry the weight somewhere (its thrust is in the right units); in a log whose thrust never
+# comes near the weight, only rest (below HELD_REST_SPEED_M_S) counts as standing, and a
+# moving body is left to the plausibility check, which names the likely wrong units.
 HELD_THRUST_SHARE = 0.05
+HELD_REST_SPEED_M_S = 0.1
+LIFTING_THRUST_SHARE = 0.5
 HELD_ACCELERATION_M_S2 = 0.25 * GRAVITY_M_S2
 HELD_S = 0.5
 SEA_LEVEL_AIR_DENSITY_KG_M3 = 1.225
@@ -222,9 +227,11 @@ def held_up(log: FlightLog, vehicle: Vehicle) -> np.ndarray:
         return np.zeros(rows, bool)
     thrust_n = vehicle.thrust_coefficient_n_s2 * np.sum(log.rotor_speeds_rad_s**2, axis=1)
     a = _kinematic_acceleration(log)
+    lifts = bool(np.any(thrust_n >= LIFTING_THRUST_SHARE * vehicle.weight_n))
+    speed_limit = held_speed_limit_m_s(vehicle) if lifts else HELD_REST_SPEED_M_S
     candidate = (
         (thrust_n < HELD_THRUST_SHARE * vehicle.mass_kg * GRAVITY_M_S2)
-        & (np.linalg.norm(log.velocity_m_s, axis=1) < held_speed_limit_m_s(vehicle))
+        & (np.linalg.norm(log.velocity_m_s, axis=1) < speed_limit)
         & (np.linalg.norm(a, axis=1) < HELD_ACCELERATION_M_S2)
     )
     # runs of candidate rows lasting HELD_S
