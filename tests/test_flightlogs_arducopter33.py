@@ -46,9 +46,10 @@ def pwm_33(rotors_rad_s: np.ndarray, p: dict[str, float]) -> np.ndarray:
     pwm_in = lo + throttle * (hi - lo)
     out_min = lo + s * (hi - lo)
     ratio = (pwm_in - out_min) / (hi - out_min)
-    e = p["MOT_THST_EXPO"]
-    ratio = ((e - 1.0) + np.sqrt((1.0 - e) ** 2 + 4.0 * e * ratio)) / (2.0 * e)
-    return ratio * p["MOT_THST_MAX"] * (hi - out_min) + out_min
+    e = p.get("MOT_THST_EXPO", 0.0)  # ArduCopter 3.2 and before: no curve
+    if e > 0.0:
+        ratio = ((e - 1.0) + np.sqrt((1.0 - e) ** 2 + 4.0 * e * ratio)) / (2.0 * e)
+    return ratio * p.get("MOT_THST_MAX", 1.0) * (hi - out_min) + out_min
 
 
 def write_dataflash_33(
@@ -99,6 +100,19 @@ def test_an_arducopter_33_log_reads_back_to_its_flight(tmp_path: Path) -> None:
     assert back.meta["sources"]["position"] == "EKF1.PN,PE,PD C=0"
     notes = "\n".join(back.meta["conversions"])
     assert "ArduCopter 3.3's motor parameters: THR_MIN 120, THR_MID 420" in notes
+    assert "not in the log" not in notes
+
+
+def test_an_arducopter_32_log_reads_its_output_linear_in_the_throttle(tmp_path: Path) -> None:
+    """Before 3.3 there was no MOT_THST_EXPO or MOT_THST_MAX: the motors' PWM was the throttle
+    mapped linearly onto RC3_MIN..RC3_MAX (read as such, not through 3.3's default curve)."""
+    log = known_flight()
+    params = {k: v for k, v in PARAMS_33.items() if k not in ("MOT_THST_EXPO", "MOT_THST_MAX")}
+    back = read_log(write_dataflash_33(tmp_path / "old.bin", log, params=params))
+    at = np.column_stack([np.interp(back.time_s, log.time_s, c) for c in log.rotor_speeds_rad_s.T])
+    np.testing.assert_allclose(back.rotor_speeds_rad_s, at, rtol=3e-3)
+    notes = "\n".join(back.meta["conversions"])
+    assert "ArduCopter 3.2 or older's motor parameters" in notes
     assert "not in the log" not in notes
 
 

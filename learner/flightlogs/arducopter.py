@@ -15,6 +15,8 @@ MOT_THST_MAX of that span (apply_thrust_curve_and_volt_scaling). That is the cur
 MOT_SPIN_MIN = s = THR_MIN/1000, MOT_SPIN_MAX = s + MOT_THST_MAX (1 - s), and a hover thrust
 of (THR_MID/1000 - s) / (1 - s) (THR_MID: the throttle at hover). ArduCopter 3.4's own
 upgrade carries THR_MIN, THR_MID and MOT_THST_MAX over the same way, without the offsets.
+ArduCopter 3.2 and before had neither MOT_THST_EXPO nor MOT_THST_MAX: the output linear in
+the throttle (expo 0, max 1; its optional piecewise MOT_TCRV_* curve is not modelled).
 """
 
 from __future__ import annotations
@@ -54,33 +56,7 @@ def curve_parameters(log: AutopilotLog, params: dict[str, float]) -> dict[str, f
     """The thrust curve's parameters under ArduCopter 3.4's names, from the log's PARMs
     (ArduCopter 3.3's converted, see the module's text); defaults assumed are noted."""
     if is_arducopter_33(params):
-        old = {k: params.get(k, d) for k, d in AC33_DEFAULTS.items()}
-        assumed = sorted(k for k in AC33_DEFAULTS if k not in params)
-        s = old["THR_MIN"] / 1000.0
-        p = {
-            "MOT_PWM_MIN": old["RC3_MIN"],
-            "MOT_PWM_MAX": old["RC3_MAX"],
-            "MOT_SPIN_MIN": s,
-            "MOT_SPIN_MAX": s + old["MOT_THST_MAX"] * (1.0 - s),
-            "MOT_THST_EXPO": old["MOT_THST_EXPO"],
-            "MOT_THST_HOVER": (old["THR_MID"] / 1000.0 - s) / (1.0 - s),
-        }
-        log.notes.append(
-            f"ArduCopter 3.3's motor parameters: THR_MIN {old['THR_MIN']:g}, THR_MID "
-            f"{old['THR_MID']:g}, MOT_THST_MAX {old['MOT_THST_MAX']:g}, RC3 "
-            f"{old['RC3_MIN']:g}..{old['RC3_MAX']:g} read as its output stage uses them"
-        )
-        if assumed:
-            log.notes.append(
-                f"warning: not in the log, ArduCopter 3.3's defaults assumed: {assumed}"
-            )
-        if not 0.0 < p["MOT_THST_HOVER"] < 1.0:
-            raise ConfigError(
-                f"{log.path}: THR_MID {old['THR_MID']:g} at or below THR_MIN {old['THR_MIN']:g}: "
-                f"no hover throttle to scale the thrust by (THR_MID must lie in "
-                f"{old['THR_MIN']:g}..1000)"
-            )
-        return p
+        return _old_curve_parameters(log, params)
     p = {k: params.get(k, d) for k, d in AC_DEFAULTS.items()}
     if p["MOT_PWM_MAX"] <= p["MOT_PWM_MIN"]:  # 0, 0: ArduCopter takes the throttle channel's
         p["MOT_PWM_MIN"] = params.get("RC3_MIN", 1000.0)
@@ -88,6 +64,47 @@ def curve_parameters(log: AutopilotLog, params: dict[str, float]) -> dict[str, f
     assumed = sorted(k for k in AC_DEFAULTS if k not in params)
     if assumed:
         log.notes.append(f"warning: not in the log, ArduCopter's defaults assumed: {assumed}")
+    return p
+
+
+def _old_curve_parameters(log: AutopilotLog, params: dict[str, float]) -> dict[str, float]:
+    """ArduCopter 3.3's parameters, or 3.2's and before (no MOT_THST_EXPO: no thrust curve,
+    the output linear in the throttle; their piecewise MOT_TCRV_* curve is not modelled)."""
+    old = {k: params.get(k, d) for k, d in AC33_DEFAULTS.items()}
+    assumed = sorted(k for k in AC33_DEFAULTS if k not in params)
+    version = "3.3"
+    if "MOT_THST_EXPO" not in params:
+        version = "3.2 or older"
+        old["MOT_THST_EXPO"], old["MOT_THST_MAX"] = 0.0, 1.0
+        assumed = [k for k in assumed if k not in ("MOT_THST_EXPO", "MOT_THST_MAX")]
+        if params.get("MOT_TCRV_ENABLE", 0):
+            log.notes.append(
+                "warning: ArduCopter 3.2's piecewise throttle curve (MOT_TCRV_*) is enabled in "
+                "this log and not modelled: thrust read linear in the PWM above THR_MIN"
+            )
+    s = old["THR_MIN"] / 1000.0
+    p = {
+        "MOT_PWM_MIN": old["RC3_MIN"],
+        "MOT_PWM_MAX": old["RC3_MAX"],
+        "MOT_SPIN_MIN": s,
+        "MOT_SPIN_MAX": s + old["MOT_THST_MAX"] * (1.0 - s),
+        "MOT_THST_EXPO": old["MOT_THST_EXPO"],
+        "MOT_THST_HOVER": (old["THR_MID"] / 1000.0 - s) / (1.0 - s),
+    }
+    log.notes.append(
+        f"ArduCopter {version}'s motor parameters: THR_MIN {old['THR_MIN']:g}, THR_MID "
+        f"{old['THR_MID']:g}, MOT_THST_MAX {old['MOT_THST_MAX']:g}, MOT_THST_EXPO "
+        f"{old['MOT_THST_EXPO']:g}, RC3 {old['RC3_MIN']:g}..{old['RC3_MAX']:g} read as its output "
+        f"stage uses them"
+    )
+    if assumed:
+        log.notes.append(f"warning: not in the log, ArduCopter's defaults assumed: {assumed}")
+    if not 0.0 < p["MOT_THST_HOVER"] < 1.0:
+        raise ConfigError(
+            f"{log.path}: THR_MID {old['THR_MID']:g} at or below THR_MIN {old['THR_MIN']:g}: "
+            f"no hover throttle to scale the thrust by (THR_MID must lie in "
+            f"{old['THR_MIN']:g}..1000)"
+        )
     return p
 
 
