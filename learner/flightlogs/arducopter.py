@@ -129,7 +129,7 @@ def arducopter_thrust(
     return Stream(pwm.t_s, (1.0 - expo) * r + expo * r * r, pwm.source), model, note
 
 
-def motor_channels(log: AutopilotLog, params: dict[str, float]) -> list[int]:
+def motor_outputs(log: AutopilotLog, params: dict[str, float]) -> list[int]:
     """The outputs of motors 1..4 by SERVOn_FUNCTION 33..36; ArduCopter's default 1..4 for a
     copter whose log has none; a plane without them has no four motors."""
     funcs = {

@@ -33,10 +33,8 @@ from learner.flightlogs.arducopter import (
     arducopter_thrust,
     ardupilot_type,
     frame_class,
+    motor_outputs,
     winged_warning,
-)
-from learner.flightlogs.arducopter import (
-    motor_channels as ap_motor_channels,
 )
 from learner.flightlogs.flightlog import FlightLog
 from learner.flightlogs.resample import QUAD_X_TO_OURS, AutopilotLog, Stream, stream, to_flightlog
@@ -110,8 +108,11 @@ def decode_dataflash(path: Path) -> AutopilotLog:
         elif t != "FMT" and (boot_s := _dataflash_boot_s(m)) is not None:
             by[t].append((boot_s, m))
     found = [f"{k} ({len(v)})" for k, v in sorted(by.items())] + [f"PARM ({len(params)})"]
-    looked = {"position": "XKF1, NKF1, EKF1 or POS", "attitude": "ATT",
-              "actuator outputs": "ESC RPM (instances 0..3) or RCOU C1..C4"}  # fmt: skip
+    looked = {
+        "position": "XKF1, NKF1, EKF1 or POS",
+        "attitude": "ATT",
+        "actuator outputs": "ESC RPM (instances 0..3) or RCOU C1..C4 (Ch1.., Chan1..)",
+    }
     log = AutopilotLog(path, "ArduPilot DataFlash log", found, looked)
     log.meta["autopilot"] = next(
         (x for x in texts if x.startswith(("Ardu", "APM:Copter"))), "ArduPilot"
@@ -150,7 +151,7 @@ def decode_dataflash(path: Path) -> AutopilotLog:
         log.actuator_model = ActuatorModel("rotor_speed", "rpm")
         log.actuator_note = "ESC rpm (instance i = motor i + 1, quad X order)"
     else:
-        channels = ap_motor_channels(log, params)
+        channels = motor_outputs(log, params)
         rcou = next(
             (
                 s
@@ -269,7 +270,7 @@ def decode_tlog(path: Path) -> AutopilotLog:
         log.actuator_note = "ESC rpm (ESC i = motor i + 1, quad X order)"
     else:
         channels = (
-            (motor_channels(params) or [0, 1, 2, 3]) if px4 else ap_motor_channels(log, params)
+            (motor_channels(params) or [0, 1, 2, 3]) if px4 else motor_outputs(log, params)
         )
         servo = _ours(series("SERVO_OUTPUT_RAW", [f"servo{c + 1}_raw" for c in channels], port=0))
         if px4:
