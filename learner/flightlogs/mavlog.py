@@ -269,9 +269,7 @@ def decode_tlog(path: Path) -> AutopilotLog:
         log.actuator_model = ActuatorModel("rotor_speed", "rpm")
         log.actuator_note = "ESC rpm (ESC i = motor i + 1, quad X order)"
     else:
-        channels = (
-            (motor_channels(params) or [0, 1, 2, 3]) if px4 else motor_outputs(log, params)
-        )
+        channels = (motor_channels(params) or [0, 1, 2, 3]) if px4 else motor_outputs(log, params)
         servo = _ours(series("SERVO_OUTPUT_RAW", [f"servo{c + 1}_raw" for c in channels], port=0))
         if px4:
             log.actuators, note = px4_pwm_thrust(servo, params)
