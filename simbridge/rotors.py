@@ -71,7 +71,12 @@ def prioritised_rotor_forces(
     and the Crazyflie's mixers do: the yaw moment, then the collective thrust, last the roll
     and pitch moments (their direction kept). Clipping each rotor alone instead turns a yaw
     demand into a roll or pitch moment nobody asked for: a laggy or heavy vehicle at full
-    tilt then tumbles. Unchanged (bit for bit) whenever the plain inverse fits."""
+    tilt then tumbles. The collective is only ever lowered (to keep the top rotor in range),
+    never raised above the demand to keep a rotor above zero: there the roll and pitch
+    moments shrink instead (PX4's mixer with MC_AIRMODE 0, its default). Raised, a vehicle
+    whose corner caught the ground kept full thrust to level itself and hovered pinned,
+    tilted, above its landing setpoint. Unchanged (bit for bit) whenever the plain inverse
+    fits."""
     t, x, y, z = _per_rotor_shares(thrust_n, moments_n_m, arm_m, yaw_moment_coefficient_m)
     forces = _mixed(t, x, y, z)
     f_max = max_rotor_force_n
@@ -82,8 +87,13 @@ def prioritised_rotor_forces(
     if spread > f_max:  # even at the best thrust: less tilt moment, the same direction
         scale = f_max / spread
         tilt = (tilt[0] * scale, tilt[1] * scale, tilt[2] * scale, tilt[3] * scale)
-    # the collective thrust moved as little as keeps every rotor in range
-    t = min(max(t, -min(tilt)), f_max - max(tilt))
+    # the collective lowered as far as keeps the top rotor in range (spread <= f_max: the
+    # bottom one stays at or above zero there)
+    t = min(t, f_max - max(tilt))
+    low = min(tilt)  # <= 0: the four shares sum to zero
+    if t + low < 0.0:  # the bottom rotor below zero: less tilt moment, the thrust kept
+        scale = max(t, 0.0) / -low
+        tilt = (tilt[0] * scale, tilt[1] * scale, tilt[2] * scale, tilt[3] * scale)
     base = (t + tilt[0], t + tilt[1], t + tilt[2], t + tilt[3])
     yaw = (-z, z, -z, z)
     share = 1.0  # of the yaw moment that fits

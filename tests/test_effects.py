@@ -113,8 +113,8 @@ def test_equations_3_5_and_3_6_and_their_inverse():
 
 def test_the_mixer_gives_up_yaw_then_thrust_then_tilt_never_the_tilt_direction():
     """Within the rotors' range the plain inverse, bit for bit. Beyond it: the yaw moment
-    shrinks first, then the collective thrust moves, and only a tilt moment no thrust can
-    give is scaled down, in its direction. Clipping each rotor alone turned a yaw demand at
+    shrinks first, then the collective thrust is lowered (never raised), and only a tilt
+    moment that does not fit is scaled down, in its direction. Clipping each rotor alone turned a yaw demand at
     full tilt into roll and pitch: the 2.7 kg quadrotor with a 60 ms motor lag tumbled on
     its first 3 m/s leg (it now flies the leg and lands)."""
     k, kz, f_max = 0.03164, 0.005964, C_T * 140.0**2
@@ -127,11 +127,17 @@ def test_the_mixer_gives_up_yaw_then_thrust_then_tilt_never_the_tilt_direction()
     t2, mx, my, mz = thrust_and_moments(f, k, kz)
     assert (t2, mx, my) == pytest.approx((t, m[0], m[1]))
     assert 0.0 < mz < m[2]
-    # low thrust and a tilt demand: the thrust rises just enough, the moments exact
+    # low thrust and a tilt demand: the thrust kept, never raised (PX4's airmode off: a
+    # vehicle caught on the ground by a corner must be able to settle), the moment scaled
     f = prioritised_rotor_forces(0.05, (4e-3, 0.0, 0.0), k, kz, f_max)
     t2, mx, my, mz = thrust_and_moments(f, k, kz)
-    assert min(f) == pytest.approx(0.0, abs=1e-15) and mx == pytest.approx(4e-3)
-    assert t2 > 0.05 and my == pytest.approx(0.0, abs=1e-15)
+    assert min(f) == pytest.approx(0.0, abs=1e-15) and 0.0 < mx < 4e-3
+    assert t2 == pytest.approx(0.05) and my == pytest.approx(0.0, abs=1e-15)
+    # a high thrust and a tilt demand: the thrust lowered just enough, the moments exact
+    f = prioritised_rotor_forces(4 * f_max - 0.01, (4e-3, 0.0, 0.0), k, kz, f_max)
+    t2, mx, my, mz = thrust_and_moments(f, k, kz)
+    assert max(f) == pytest.approx(f_max) and mx == pytest.approx(4e-3)
+    assert t2 < 4 * f_max - 0.01
     # a tilt moment no thrust can give: scaled, its direction kept, yaw given up
     m = (0.04, -0.02, 1e-3)
     f = prioritised_rotor_forces(0.6, m, k, kz, f_max)
