@@ -114,9 +114,9 @@ def test_equations_3_5_and_3_6_and_their_inverse():
 def test_the_mixer_gives_up_yaw_then_thrust_then_tilt_never_the_tilt_direction():
     """Within the rotors' range the plain inverse, bit for bit. Beyond it: the yaw moment
     shrinks first, then the collective thrust is lowered (never raised), and only a tilt
-    moment that does not fit is scaled down, in its direction. Clipping each rotor alone turned a yaw demand at
-    full tilt into roll and pitch: the 2.7 kg quadrotor with a 60 ms motor lag tumbled on
-    its first 3 m/s leg (it now flies the leg and lands)."""
+    moment that does not fit is scaled down, in its direction. Clipping each rotor alone
+    turned a yaw demand at full tilt into roll and pitch: the 2.7 kg quadrotor with a 60 ms
+    motor lag tumbled on its first 3 m/s leg (it now flies the leg and lands)."""
     k, kz, f_max = 0.03164, 0.005964, C_T * 140.0**2
     fit = (0.6, (1e-3, -2e-3, 1e-4))
     assert prioritised_rotor_forces(*fit, k, kz, f_max) == rotor_forces_for(*fit, k, kz)

@@ -138,6 +138,35 @@ def test_a_heavy_vehicle_with_slow_motors_flies_fast_legs_and_lands(tmp_path):
     assert summary["landed"] and summary["landing_error_m"] < 0.05
 
 
+def test_a_heavy_vehicle_caught_on_the_ground_by_a_corner_settles_and_lands(tmp_path):
+    """The 2.7 kg quadrotor in a 2 m/s wind with its thrust axis leaning 1.8 deg flies the
+    gap bench's aggressive mission, whose last hold (4 cm) lies below its resting height
+    (10 cm): dragged on the ground, it tips onto a corner. The mixer raised the collective
+    to keep the bottom rotor above zero for the levelling moment, and the vehicle hovered
+    pinned, 10 deg tilted, 15 cm above its landing setpoint until the mission's time ran
+    out; with the collective never raised (PX4's airmode off) it settles and lands."""
+    import yaml
+
+    from mission.campaigns.gap_flights import bench_mission
+
+    world = tmp_path / "caught.yaml"
+    world.write_text(yaml.safe_dump({
+        "vehicle": "quad_2_7kg",
+        "effects": [
+            {"name": "ground_effect"}, {"name": "rotor_drag"},
+            {"name": "thrust_tilt", "lean_deg": [-1.5, 1.0]},
+            {"name": "wind", "mean_m_s": [2.0, 0.0, 0.0]},
+        ],
+    }))  # fmt: skip
+    mission = tmp_path / "aggressive.yaml"
+    mission.write_text(yaml.safe_dump(bench_mission("aggressive", 1)))
+    params = ("MPC_Z_V_AUTO_UP=1.0", "MPC_Z_V_AUTO_DN=1.0")
+    summary = fly(mission, world=str(world), via_gcs=False, record=False, max_flight_s=40.0,
+                  autopilot_options=[a for p in params for a in ("--param", p)],
+                  sim_options=["--ideal-sensors"])  # fmt: skip
+    assert summary["landed"], summary["ended"]
+
+
 def test_a_killed_simulator_ends_the_autopilot_within_a_second_with_its_log(tmp_path):
     sim, port = start_sim("default", speedup="1")
     trajectory = tmp_path / "t.npz"
