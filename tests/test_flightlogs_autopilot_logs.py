@@ -245,7 +245,7 @@ DF_FORMATS = {  # name: (type, format characters, columns), as ArduCopter 4 logs
     "IMU": (67, "QBffffff", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),
     "XKF1": (68, "QBffffff", "TimeUS,C,VN,VE,VD,PN,PE,PD"),
     "RCOU": (69, "QHHHHHHHH", "TimeUS,C1,C2,C3,C4,C5,C6,C7,C8"),
-    "BAT": (70, "QBf", "TimeUS,Instance,Volt"),
+    "BAT": (70, "QBf", "TimeUS,Inst,Volt"),  # Instance before 4.1
 }
 
 
@@ -297,7 +297,7 @@ def write_dataflash(
         out += df_record("IMU", us, 0, *a["rates"][k], *a["specific_force"][k])
         out += df_record("XKF1", us, 0, *a["vel"][k], *a["pos"][k])
         out += df_record("RCOU", us, *(round(p) for p in pwm[k]), 0, 0, 0, 0)
-        out += df_record("BAT", us, 0, 11.1)
+        out += df_record("BAT", us, 1, 5.0) + df_record("BAT", us, 0, 11.1)  # two batteries
     path.write_bytes(bytes(out))
     return path
 
@@ -360,7 +360,7 @@ def test_refuses_a_log_without_position(tmp_path: Path) -> None:
 def test_refuses_a_log_without_attitude(tmp_path: Path) -> None:
     path = write_dataflash(tmp_path / "noatt.bin", known_flight(2.0), attitude=False)
     with pytest.raises(ConfigError, match=r"noatt.bin: this ArduPilot DataFlash log has no "
-                       r"attitude \(looked for ATT\); the log has: BAT \(100\), IMU"):  # fmt: skip
+                       r"attitude \(looked for ATT\); the log has: BAT \(200\), IMU"):  # fmt: skip
         read_log(path)
 
 

@@ -121,7 +121,7 @@ def decode_dataflash(path: Path) -> AutopilotLog:
 
     def series(name: str, fields: list[str], scale: float = 1.0, **match: int) -> Stream | None:
         rows = [(t, m) for t, m in by.get(name, [])
-                if all(getattr(m, k, v) == v for k, v in match.items())]  # fmt: skip
+                if all(_matches(m, k, v) for k, v in match.items())]  # fmt: skip
         src = f"{name}.{','.join(fields)}" + "".join(f" {k}={v}" for k, v in match.items())
         return stream([t for t, _ in rows], [[getattr(m, f) * scale for f in fields]
                                              for _, m in rows], src)  # fmt: skip
@@ -166,6 +166,19 @@ def decode_dataflash(path: Path) -> AutopilotLog:
     log.battery_v = series("BAT", ["Volt"], Instance=0) or _volts(by, series)
     log.range_m = series("RFND", ["Dist"], Instance=0)
     return log
+
+
+# A field's other names across ArduPilot's versions (BAT's Instance became Inst in 4.1)
+FIELD_ALIASES = {"Instance": ("Instance", "Inst")}
+
+
+def _matches(m: Any, field: str, value: int) -> bool:
+    """The message's `field` (or its alias) equals `value`; a message without it matches
+    (one instance, one core)."""
+    for name in FIELD_ALIASES.get(field, (field,)):
+        if hasattr(m, name):
+            return getattr(m, name) == value
+    return True
 
 
 def _dataflash_boot_s(m: Any) -> float | None:
