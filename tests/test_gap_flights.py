@@ -5,6 +5,7 @@ cached flights dropped when the missions change (no flight is flown here)."""
 from __future__ import annotations
 
 import itertools
+import math
 from pathlib import Path
 
 import pytest
@@ -19,6 +20,7 @@ from mission.campaigns.gap_flights import (
     WALL_HOLD_RADII,
     bench_mission,
 )
+from simbridge.vehicle import load_vehicle
 
 
 def heights(mission: dict) -> list[float]:
@@ -36,6 +38,26 @@ def test_cruising_flights_climb_and_descend_a_metre_twice_at_one_spot(kind: str)
     assert max(z) < 1.5 and min(z) > 0.2  # far from the ground and a 3 m ceiling
     # the low pass still ends the mission
     assert wps[-1]["position_m"][2] == 0.04
+
+
+def test_a_large_frame_flies_the_bench_missions_clear_of_the_ground() -> None:
+    """The bench's heights were the nano's: a 4 cm hold lay below the 2.7 kg quadrotor's
+    10 cm resting height and 0.25 m legs flown at 30 deg put its 0.6 m frame's corner in
+    the ground (a blind case tipped onto a corner; another's flights were a fifth ground
+    contact). Heights now rise where a vehicle's body needs it; the nano's and the
+    Crazyflies' missions are unchanged."""
+    big = load_vehicle("quad_2_7kg")
+    half_h, half_diag = big.body_size_m[2] / 2, math.hypot(*big.body_size_m[:2]) / 2
+    for kind in ("mixed", "hover", "aggressive", "wall"):
+        for seed in (0, 1, 100):
+            for wp in bench_mission(kind, seed, vehicle=big)["waypoints"]:
+                z = wp["position_m"][2]
+                assert z >= half_h + 0.02  # level: above its resting height
+                if wp.get("acceptance_radius_m", 1.0) > 0.03 and not wp.get("hold_s"):  # legs
+                    assert z - half_h * math.cos(math.pi / 6) - half_diag * 0.5 >= 0.05 - 1e-9
+            for name in ("nano", "crazyflie2", "crazyflie2_large"):
+                small = bench_mission(kind, seed, vehicle=load_vehicle(name))
+                assert small == bench_mission(kind, seed)  # the nano's, as before
 
 
 def test_vertical_speed_limits_let_a_metre_step_be_the_loops_plain_step() -> None:

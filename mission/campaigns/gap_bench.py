@@ -17,6 +17,7 @@ from mission.campaigns.gap_bench_cases import Case, real_effects
 from mission.campaigns.gap_bench_ooc import summary as ooc_summary
 from mission.campaigns.gap_bench_ooc import verdict, verdict_text
 from mission.campaigns.gap_flights import AUTOPILOT_PARAMS, BENCH_NOISE, bench_mission, real_log
+from simbridge.vehicle import load_vehicle
 
 FIT_SEEDS = (0, 1)
 HOLD_SEEDS = (100,)
@@ -53,7 +54,8 @@ def run_case(case: Case, out: Path, replay: bool = True, record: bool = False) -
     real = _world_file(folder / "real_world.yaml", case, real_effects(case))
     nominal = _world_file(folder / "nominal_world.yaml", case, case.nominal)
     ceiling = case.world.get("ceiling_height_m")
-    missions = {s: bench_mission(case.kind, s, ceiling) for s in FIT_SEEDS + HOLD_SEEDS}
+    vehicle = load_vehicle({**BASE, **case.world}["vehicle"])
+    missions = {s: bench_mission(case.kind, s, ceiling, vehicle) for s in FIT_SEEDS + HOLD_SEEDS}
     _drop_stale_flights(folder, real.read_text() + repr(missions) + repr(AUTOPILOT_PARAMS))
     logs = {}
     for seed, mission in missions.items():

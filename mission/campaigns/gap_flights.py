@@ -4,6 +4,7 @@ closed-loop replays of held-out missions in the nominal and corrected worlds."""
 
 from __future__ import annotations
 
+import math
 import random
 from pathlib import Path
 from typing import Any
@@ -13,6 +14,7 @@ import yaml
 from learner.flightlogs.flightlog import FlightLog, add_noise, write_log
 from learner.flightlogs.readers import read_log
 from mission.fly import fly
+from simbridge.vehicle import Vehicle, load_vehicle
 
 # The documented sensor noise of bench logs (standard deviations, white): a motion-capture
 # pose, an IMU and ESC speed readings of a nano quadrotor.
@@ -53,12 +55,43 @@ REFERENCE_ROTOR_RADIUS_M = 0.047
 SURFACE_HOLD_S = 3.0
 
 
-def bench_mission(kind: str, seed: int, ceiling_m: float | None = None) -> dict[str, Any]:
+# Heights a vehicle's body must keep clear of the ground: a slow, level hold its resting
+# height and HOLD_CLEARANCE_M more; a leg flown tilted up to LEG_TILT_DEG its lowest corner
+# LEG_CLEARANCE_M above the ground. Below the reference vehicles' heights (nano, Crazyflies:
+# their missions unchanged); a 600 mm frame's raised.
+HOLD_CLEARANCE_M = 0.02
+LEG_TILT_DEG = 30.0
+LEG_CLEARANCE_M = 0.05
+
+
+def height_floors_m(vehicle: Vehicle) -> tuple[float, float]:
+    """(a level hold's, a tilted leg's) lowest height of the centre of mass for `vehicle`."""
+    half_height = vehicle.body_size_m[2] / 2.0
+    half_diagonal = math.hypot(vehicle.body_size_m[0], vehicle.body_size_m[1]) / 2.0
+    tilt = math.radians(LEG_TILT_DEG)
+    leg = half_height * math.cos(tilt) + half_diagonal * math.sin(tilt) + LEG_CLEARANCE_M
+    return half_height + HOLD_CLEARANCE_M, leg
+
+
+def bench_mission(
+    kind: str, seed: int, ceiling_m: float | None = None, vehicle: Vehicle | None = None
+) -> dict[str, Any]:
     """A short seeded mission. `mixed`: cruising at 1 m/s at several heights, vertical legs
     and a low pass at 4 cm; `hover`: holds at 0.5 m and 6 cm; `aggressive`: long legs at
     2.5 m/s, then the same vertical legs; `wall`: like mixed without the vertical legs,
     holding close to a wall at y = 0.6 m; `ceiling`: like `wall`, holding under the ceiling
-    at `ceiling_m` (required) instead."""
+    at `ceiling_m` (required) instead. `vehicle` (default the nano): heights raised where
+    its body would meet the ground (`height_floors_m`)."""
+    mission = _bench_mission(kind, seed, ceiling_m)
+    hold_floor, leg_floor = height_floors_m(vehicle or load_vehicle("nano"))
+    for wp in mission["waypoints"]:
+        slow = wp.get("acceptance_radius_m", 1.0) <= 0.03 or wp.get("hold_s", 0.0) > 0.0
+        floor = hold_floor if slow else leg_floor
+        wp["position_m"][2] = max(wp["position_m"][2], floor)
+    return mission
+
+
+def _bench_mission(kind: str, seed: int, ceiling_m: float | None) -> dict[str, Any]:
     if kind not in KINDS:
         raise ValueError(f"mission kind {kind!r}: expected one of {', '.join(KINDS)}")
     if kind == "ceiling" and ceiling_m is None:
