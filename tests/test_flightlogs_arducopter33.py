@@ -17,7 +17,14 @@ import pytest
 from learner.flightlogs.flightlog import FlightLog
 from learner.flightlogs.readers import read_log
 from simbridge.config import ConfigError
-from tests.test_flightlogs_autopilot_logs import NANO, df_formats, df_record, known_flight, ned_frd
+from tests.test_flightlogs_autopilot_logs import (
+    NANO,
+    assert_dataflash_round_trip,
+    df_formats,
+    df_record,
+    known_flight,
+    ned_frd,
+)
 
 FORMATS_33 = {  # name: (type, format characters, columns), as ArduCopter 3.3 logs them
     "PARM": (64, "Nf", "Name,Value"),
@@ -81,18 +88,7 @@ def write_dataflash_33(
 def test_an_arducopter_33_log_reads_back_to_its_flight(tmp_path: Path) -> None:
     log = known_flight()
     back = read_log(write_dataflash_33(tmp_path / "log171.bin", log))
-
-    def at(a: np.ndarray) -> np.ndarray:
-        return np.column_stack([np.interp(back.time_s, log.time_s, c) for c in a.T])
-
-    dots = np.abs(np.sum(back.quaternion * at(log.quaternion), axis=1))
-    assert dots.min() > 1 - 1e-8  # ATT in centidegrees
-    np.testing.assert_allclose(back.position_m, at(log.position_m), atol=1e-4)
-    np.testing.assert_allclose(back.velocity_m_s, at(log.velocity_m_s), atol=1e-4)
-    np.testing.assert_allclose(back.body_rates_rad_s, at(log.body_rates_rad_s), atol=1e-5)
-    np.testing.assert_allclose(back.acceleration_m_s2, at(log.acceleration_m_s2), atol=2e-3)
-    # whole microseconds of PWM: 0.3% of the thrust
-    np.testing.assert_allclose(back.rotor_speeds_rad_s, at(log.rotor_speeds_rad_s), rtol=3e-3)
+    assert_dataflash_round_trip(back, log)
     assert back.battery_v == pytest.approx(np.full(len(back), 16.54))
     assert back.time_s[-1] - back.time_s[0] == pytest.approx(log.time_s[-1] - log.time_s[0],
                                                              abs=0.03)  # fmt: skip

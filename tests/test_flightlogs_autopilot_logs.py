@@ -302,20 +302,26 @@ def write_dataflash(
     return path
 
 
-def test_dataflash_round_trip(tmp_path: Path) -> None:
-    log = known_flight()
-    back = read_log(write_dataflash(tmp_path / "00000001.BIN", log))
+def assert_dataflash_round_trip(back: FlightLog, log: FlightLog) -> None:
+    """A DataFlash log of `log` read back: ATT in centidegrees (0.005 degrees is 9e-5 rad),
+    PWM in whole microseconds (0.3% of the thrust), the rest in floats."""
 
-    # ATT holds centidegrees: 0.005 degrees is 9e-5 rad
     def at(a: np.ndarray) -> np.ndarray:
         return np.column_stack([np.interp(back.time_s, log.time_s, c) for c in a.T])
 
     dots = np.abs(np.sum(back.quaternion * at(log.quaternion), axis=1))
     assert dots.min() > 1 - 1e-8
     np.testing.assert_allclose(back.position_m, at(log.position_m), atol=1e-4)
+    np.testing.assert_allclose(back.velocity_m_s, at(log.velocity_m_s), atol=1e-4)
     np.testing.assert_allclose(back.rotor_speeds_rad_s, at(log.rotor_speeds_rad_s), rtol=3e-3)
     np.testing.assert_allclose(back.acceleration_m_s2, at(log.acceleration_m_s2), atol=2e-3)
     np.testing.assert_allclose(back.body_rates_rad_s, at(log.body_rates_rad_s), atol=1e-5)
+
+
+def test_dataflash_round_trip(tmp_path: Path) -> None:
+    log = known_flight()
+    back = read_log(write_dataflash(tmp_path / "00000001.BIN", log))
+    assert_dataflash_round_trip(back, log)
     assert back.battery_v == pytest.approx(np.full(len(back), 11.1))
     assert back.meta["autopilot"] == "ArduCopter V4.5.7"
     assert back.meta["sources"]["position"] == "XKF1.PN,PE,PD C=0"

@@ -152,14 +152,14 @@ def decode_dataflash(path: Path) -> AutopilotLog:
         log.actuator_note = "ESC rpm (instance i = motor i + 1, quad X order)"
     else:
         channels = motor_outputs(log, params)
-        rcou = next(
-            (
-                s
-                for prefix in ("C", "Ch", "Chan")  # ArduCopter 3.4 on, 3.3, before
-                if (s := _if_fields(by, "RCOU", [f"{prefix}{c + 1}" for c in channels], series))
-            ),
+        first = by["RCOU"][0][1] if by.get("RCOU") else None
+        # the outputs' names: C1.. (ArduCopter 3.4 on), Ch1.. (3.3), Chan1.. (before)
+        names = next(
+            ([f"{p}{c + 1}" for c in channels] for p in ("C", "Ch", "Chan")
+             if all(hasattr(first, f"{p}{c + 1}") for c in channels)),
             None,
-        )
+        )  # fmt: skip
+        rcou = series("RCOU", names) if names else None
         log.actuators, log.actuator_model, log.actuator_note = arducopter_thrust(
             log, _ours(rcou), params
         )
@@ -189,14 +189,6 @@ def _dataflash_boot_s(m: Any) -> float | None:
     if m.get_type() == "GPS":
         return m.T * 1e-3 if hasattr(m, "T") else None
     return m.TimeMS * 1e-3 if hasattr(m, "TimeMS") else None
-
-
-def _if_fields(by: dict[str, list[tuple[float, Any]]], name: str, fields: list[str],
-               series: Any) -> Stream | None:  # fmt: skip
-    rows = by.get(name)
-    if not rows or not all(hasattr(rows[0][1], f) for f in fields):
-        return None
-    return series(name, fields)
 
 
 def _volts(by: dict[str, list[tuple[float, Any]]], series: Any) -> Stream | None:
