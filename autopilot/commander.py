@@ -156,8 +156,10 @@ def limited_setpoint(
     horizontal_m_s: float,
     up_m_s: float,
     down_m_s: float,
+    vertical_lead_s: float | None = None,
 ) -> Vec3:
-    """The target, pulled to within `lead_s` times the speed limits of the vehicle.
+    """The target, pulled to within `lead_s` (horizontally; `vertical_lead_s` vertically,
+    by default the same) times the speed limits of the vehicle.
 
     The position loop's steady speed for an error e is e a0 / a1 (equation 3.7 with zero
     desired velocity), so an error clipped to speed * a1 / a0 (`lead_s`) cruises at that
@@ -165,16 +167,17 @@ def limited_setpoint(
     setpoint ramping at the speed instead would overshoot by about speed / a0 when it stops:
     near the ground, into the ground.
     """
+    lead_z = vertical_lead_s if vertical_lead_s is not None else lead_s
     dx, dy, dz = (target[0] - position[0], target[1] - position[1], target[2] - position[2])
     horizontal = math.hypot(dx, dy)
     reach = horizontal_m_s * lead_s
-    if horizontal <= reach and -down_m_s * lead_s <= dz <= up_m_s * lead_s:
+    if horizontal <= reach and -down_m_s * lead_z <= dz <= up_m_s * lead_z:
         # the target itself, not position + (target - position), which rounding leaves a few
         # ulp off: the waypoint timeout starts when the setpoint equals the target
         return target
     if horizontal > reach:
         dx, dy = dx * reach / horizontal, dy * reach / horizontal
-    dz = min(dz, up_m_s * lead_s) if dz > 0.0 else max(dz, -down_m_s * lead_s)
+    dz = min(dz, up_m_s * lead_z) if dz > 0.0 else max(dz, -down_m_s * lead_z)
     return (position[0] + dx, position[1] + dy, position[2] + dz)
 
 
@@ -312,6 +315,7 @@ def command(
     resting_height_m: float,
     lead_s: float = 2.0,
     ground_contact: bool = False,
+    vertical_lead_s: float | None = None,
 ) -> Command:
     """One commander step at `time_s` from the vehicle's position and height above the surface;
     `ground_contact`: the land detector's verdict (autopilot/land_detector.py)."""
@@ -409,6 +413,7 @@ def command(
         horizontal,
         params.climb_speed_m_s,
         params.descent_speed_m_s,
+        vertical_lead_s,
     )
     state = _reached(state.evolve(carrot_m=carrot), params, time_s, position_m)
     if state.phase == Phase.TAKING_OFF and state.reached_s is not None:

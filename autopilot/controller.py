@@ -43,21 +43,39 @@ JERK_DEFAULT_M_S3 = 18.0
 
 @dataclass(frozen=True)
 class ControllerParams:
-    """Gains. Position: a0 = 6, a1 = 6 and an integral of the PD term with gain k_i = 4/s,
-    as PX4's velocity-loop integrator (the PD term is zero in steady motion towards a
-    setpoint that leads the vehicle, so nothing winds up on the way): closed-loop poles at
-    -0.95 and -2.5 +- 4.3j. The integral flies out a mass or thrust error. With the ground
-    effect compensated, the position loop is the only spring holding the vehicle near the
-    ground, so its stiffness sets how far an error of the ground-effect estimate moves it:
-    at 3 cm over rho 2 a height error of 0.2 mm (the estimator's with 1 mm motion capture)
-    is 5 mN, which moves the vehicle 18 cm at the thesis's a0 = 1 and a few mm here (the
-    gains were chosen over nine seeded demo flights: `groundfx fly` with GFX_POS_*). The
-    thesis's pure PD (a0 = 1, a1 = 2, no integral) is `THESIS_GAINS`. Attitude: the thesis
-    used 1 and 2, which makes the inner loop no faster than the outer one; here a double
-    pole at s = -20 rad/s (k_p = 400, k_d = 40), inside the 250 Hz control rate."""
+    """Gains. Horizontal position: a0 = 6, a1 = 6; vertical: a0 = 36, a1 = 12 (a double pole
+    at s = -6 rad/s); an integral of the PD term with gain k_i = 4/s on every axis, as PX4's
+    velocity-loop integrator (the PD term is zero in steady motion towards a setpoint that
+    leads the vehicle, so nothing winds up on the way). The integral flies out a mass or
+    thrust error. Why the vertical loop is the stiffer: with the ground effect compensated
+    the vertical position loop is the only spring holding the vehicle near the ground, and
+    the compensation turns an error e of the estimated height into a force: at 3 cm over
+    rho 2 the ground effect changes by G = 0.2 m/s^2 per mm on the nano, which the loop
+    balances G e / a0 away. The estimated height's slow error, within the loop's bandwidth,
+    is about 0.3 mm on a range sensor of 2.5 mm noise at 50 Hz (the flow deck), so a hold
+    within 2 mm asks a0 >= 0.2 * 0.3 / 0.002 = 30/s^2; critically damped, 36 and 12. The
+    Crazyflie's Mellinger controller flies its 27 g vehicle at kp_z = 1.25 N/m and kd_z =
+    0.4 N s/m, 46/s^2 and 15/s per mass, and 15/s^2 and 7.4/s horizontally: vertical loops
+    of nano quadrotors are stiffer than horizontal ones. Horizontally the loop shapes the
+    path (the setpoint's lead, the jerk limit) and meets no such gradient. With the integral
+    the poles are at -0.95 and -2.5 +- 4.3j horizontally, -2.3 and -4.8 +- 6.2j vertically.
+    The thesis's pure PD (a0 = 1, a1 = 2 on every axis, no integral) is `THESIS_GAINS`.
+    Attitude: the thesis used 1 and 2, which makes the inner loop no faster than the outer
+    one; here a double pole at s = -20 rad/s (k_p = 400, k_d = 40), inside the 250 Hz
+    control rate."""
 
-    position_p: float = param(6.0, unit="1/s^2", lo=0.0, hi=100.0, doc="a0 of equation 3.7")
-    position_d: float = param(6.0, unit="1/s", lo=0.0, hi=100.0, doc="a1 of equation 3.7")
+    position_p: float = param(
+        6.0, unit="1/s^2", lo=0.0, hi=100.0, doc="a0 of equation 3.7, horizontal"
+    )
+    position_d: float = param(
+        6.0, unit="1/s", lo=0.0, hi=100.0, doc="a1 of equation 3.7, horizontal"
+    )
+    vertical_p: float = param(
+        36.0, unit="1/s^2", lo=0.0, hi=400.0, doc="a0 of equation 3.7, vertical"
+    )
+    vertical_d: float = param(
+        12.0, unit="1/s", lo=0.0, hi=100.0, doc="a1 of equation 3.7, vertical"
+    )
     position_i: float = param(
         4.0, unit="1/s", lo=0.0, hi=100.0, doc="integral gain on the PD term (0: the thesis's PD)"
     )
@@ -110,7 +128,10 @@ def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
-THESIS_GAINS = {"GFX_POS_P": 1.0, "GFX_POS_D": 2.0, "GFX_POS_I": 0.0}  # thesis section 3.4
+# thesis section 3.4: the same PD on every axis, no integral
+THESIS_GAINS = {
+    "GFX_POS_P": 1.0, "GFX_POS_D": 2.0, "GFX_POS_Z_P": 1.0, "GFX_POS_Z_D": 2.0, "GFX_POS_I": 0.0
+}  # fmt: skip
 
 
 def integrate(
@@ -197,7 +218,8 @@ def control(
     pd = (
         e_xy[0] + a1 * (sp.velocity_m_s[0] - v[0]),
         e_xy[1] + a1 * (sp.velocity_m_s[1] - v[1]),
-        a0 * (sp.position_m[2] - p[2]) + a1 * (sp.velocity_m_s[2] - v[2]),
+        params.vertical_p * (sp.position_m[2] - p[2])
+        + params.vertical_d * (sp.velocity_m_s[2] - v[2]),
     )
     ff = sp.acceleration_m_s2
     ax, ay, az = pd[0] + ff[0] + i[0], pd[1] + ff[1] + i[1], pd[2] + ff[2] + i[2]

@@ -115,6 +115,7 @@ class Tuning:
         gains = self.controller
         # the speed limits' lead: steady speed = error * a0 / a1 (commander.limited_setpoint)
         self.lead_s = gains.position_d / gains.position_p if gains.position_p > 0 else 2.0
+        self.vertical_lead_s = gains.vertical_d / gains.vertical_p if gains.vertical_p > 0 else 2.0
         key = store.model()
         if key != self.model_key:
             self.model_key = key
@@ -261,6 +262,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
                 resting_height,
                 tuning.lead_s,
                 detector.landed(t, tuning.land_detector),
+                tuning.vertical_lead_s,
             )
             cmd_state = cmd.state
             airborne = height > resting_height + AIRBORNE_MARGIN_M

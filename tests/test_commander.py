@@ -71,6 +71,9 @@ def test_speed_limits_clip_the_setpoint_not_the_short_moves():
     assert far == pytest.approx((1.0, 0, 1))  # steady speed 1 m * a0 / a1 = 0.5 m/s
     down = limited_setpoint((0, 0, 5), (0, 0, 0.03), lead, 0.5, 0.5, 0.25)
     assert down == pytest.approx((0, 0, 4.5))
+    # the stiffer vertical loop (a1 / a0 = 12 / 36 s) leads by its own, shorter, time
+    both = limited_setpoint((0, 0, 5), (10.0, 0, 0.03), 1.0, 0.5, 0.5, 0.25, 1.0 / 3.0)
+    assert both == pytest.approx((0.5, 0, 5 - 0.25 / 3.0))
 
 
 def test_requests_are_idempotent_and_refusals_say_why():

@@ -28,7 +28,8 @@ from simbridge.rotors import rotor_forces_n, thrust_and_moments
 from simbridge.vehicle import GRAVITY_M_S2, load_vehicle
 
 V = load_vehicle()
-P = ControllerParams(position_p=1.0, position_d=2.0, position_i=0.0)  # the thesis's gains
+# the thesis's gains, the same on every axis
+P = ControllerParams(position_p=1.0, position_d=2.0, vertical_p=1.0, vertical_d=2.0, position_i=0.0)
 LEVEL = FlightState((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
 
@@ -158,7 +159,20 @@ def test_a_saturated_command_is_flagged_so_that_the_integral_does_not_wind_up():
     assert out.saturated
     near = Setpoint((0.0, 0.0, 1.01))
     out = control(LEVEL, near, (0.0, 0.0, 0.0), V, ControllerParams())
-    assert not out.saturated and out.pd_acceleration_m_s2[2] == pytest.approx(0.06)
+    assert not out.saturated and out.pd_acceleration_m_s2[2] == pytest.approx(0.36)
+
+
+def test_the_vertical_loop_is_stiffer_than_the_horizontal_one_by_default():
+    """a0 = 36, a1 = 12 along z (the spring that holds the vehicle in the ground effect),
+    6 and 6 across; `GFX_POS_Z_*` and `GFX_POS_*` set each."""
+    moving = FlightState((0.0, 0.0, 1.0), (0.1, 0.0, 0.1), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    out = control(moving, Setpoint((0.01, 0.0, 1.01)), (0.0, 0.0, 0.0), V, ControllerParams())
+    assert out.pd_acceleration_m_s2 == pytest.approx(
+        (6 * 0.01 - 6 * 0.1, 0.0, 36 * 0.01 - 12 * 0.1)
+    )
+    soft = ControllerParams(vertical_p=6.0, vertical_d=6.0)
+    out = control(moving, Setpoint((0.01, 0.0, 1.01)), (0.0, 0.0, 0.0), V, soft)
+    assert out.pd_acceleration_m_s2[2] == pytest.approx(6 * 0.01 - 6 * 0.1)
 
 
 def test_a_new_model_takes_over_what_the_integral_held_and_no_more():

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from autopilot.controller import THESIS_GAINS
 from mission.fly import fly
 from tests.helpers import REPO
 
@@ -93,7 +94,7 @@ def test_the_pd_of_the_thesis_alone_leaves_the_heavier_vehicle_sagging(write_wor
     heavier = [{"name": "ground_effect", "rho": 1.0}, {"name": "mass_error", "scale": 1.1}]
     world = write_world({"vehicle": "nano", "effects": heavier})
     track = tmp_path / "t.npz"
-    thesis = ["--param", "GFX_POS_P=1", "--param", "GFX_POS_D=2", "--param", "GFX_POS_I=0"]
+    thesis = [a for k, v in THESIS_GAINS.items() for a in ("--param", f"{k}={v:g}")]
     fly(
         EXAMPLES / "hover.yaml",
         world=str(world),

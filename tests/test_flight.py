@@ -87,8 +87,9 @@ def test_fly_json_reports_the_figures():
         "controller_us_p50",
     ):
         assert isinstance(summary[key], float), key
-    # a figure, not a speed target (the benchmark commands measure speed): > 0 on any machine
-    assert summary["sim_s"] > 15 and summary["rtf"] > 0
+    # a figure, not a speed target (the benchmark commands measure speed): > 0 on any machine;
+    # the flight lasted at least the mission's two holds (1 s and 6 s)
+    assert summary["sim_s"] > 7 and summary["rtf"] > 0
 
 
 def test_fly_gives_the_autopilot_the_worlds_vehicle(tmp_path):

@@ -61,10 +61,14 @@ def test_gather_records_the_thesis_features_and_equation_3_16(gathered):
     assert np.all(c["z"] > 0.0126 + 0.002)  # only in the air
     # the target from the measured acceleration (the estimator's bias removed) agrees with
     # the simulator's truth: no bias, and a spread of the accelerometer's white noise
-    # (1.7e-3 m/s^2/sqrt(Hz) at 250 Hz: 1.5 mN per sample)
+    # (1.7e-3 m/s^2/sqrt(Hz) at 250 Hz: 1.5 mN per sample) where the vehicle climbs or sinks
+    # slower than 0.2 m/s. Faster, through the steep ground effect 2-5 cm up (the take-off),
+    # the target, a mean over the control period, and the truth at its end differ by
+    # half the ground effect's change over it (at 0.4 m/s, 2 cm over rho 2: about 0.06 N)
     err = c["fge_z"] - c["true_fge_z"]
-    assert abs(np.mean(err)) < 0.001
-    assert np.sqrt(np.mean(err**2)) < 0.0025
+    slow = np.abs(c["vz"]) < 0.2
+    assert abs(np.mean(err)) < 0.001 and slow.mean() > 0.7
+    assert np.sqrt(np.mean(err[slow] ** 2)) < 0.0025
     assert np.allclose(
         np.linalg.norm(data.matrix(("qw", "qx", "qy", "qz")), axis=1), 1.0, atol=1e-6
     )

@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from autopilot.controller import THESIS_GAINS
 from autopilot.metrics import FAR_FROM_GROUND_M, NEAR_GROUND_M
 from learner.flightlogs.readers import read_log
 from learner.model import load_model
@@ -65,7 +66,7 @@ LINK_LOST = "lost the simulator link"  # autopilot/runner.py's words, as the exp
 LINK_RETRIES = 2
 BASIS_NETWORK = "grounds"  # the packaged basis model (learner/basis.py)
 CONTROLLERS: dict[str, tuple[str, ...]] = {
-    "thesis": ("GFX_POS_P=1", "GFX_POS_D=2", "GFX_POS_I=0"),  # the thesis's PD (3.7)
+    "thesis": tuple(f"{k}={v:g}" for k, v in THESIS_GAINS.items()),  # the thesis's PD (3.7)
     "default": (),
 }
 
