@@ -57,8 +57,12 @@ class ControllerParams:
     Crazyflie's Mellinger controller flies its 27 g vehicle at kp_z = 1.25 N/m and kd_z =
     0.4 N s/m, 46/s^2 and 15/s per mass, and 15/s^2 and 7.4/s horizontally: vertical loops
     of nano quadrotors are stiffer than horizontal ones. Horizontally the loop shapes the
-    path (the setpoint's lead, the jerk limit) and meets no such gradient. With the integral
-    the poles are at -0.95 and -2.5 +- 4.3j horizontally, -2.3 and -4.8 +- 6.2j vertically.
+    path (the setpoint's lead, the jerk limit) and meets no such gradient. The vertical PD
+    term asks for at most 4 m/s^2 up or down (PX4's MPC_ACC_UP_MAX): a stiff loop answers a
+    large error with a large thrust step, and rotors that spin down slowly (a propeller
+    coasting 0.8 s) turn those steps into a growing vertical oscillation; in a hold the
+    term is a hundredth of that. With the integral the poles are at -0.95 and -2.5 +- 4.3j
+    horizontally, -2.3 and -4.8 +- 6.2j vertically.
     The thesis's pure PD (a0 = 1, a1 = 2 on every axis, no integral) is `THESIS_GAINS`.
     Attitude: the thesis used 1 and 2, which makes the inner loop no faster than the outer
     one; here a double pole at s = -20 rad/s (k_p = 400, k_d = 40), inside the 250 Hz
@@ -76,6 +80,10 @@ class ControllerParams:
     vertical_d: float = param(
         12.0, unit="1/s", lo=0.0, hi=100.0, doc="a1 of equation 3.7, vertical"
     )
+    vertical_accel_limit_m_s2: float = param(
+        4.0, unit="m/s^2", lo=0.1, hi=100.0,
+        doc="largest vertical acceleration the PD term of 3.7 may ask for, up or down",
+    )  # fmt: skip
     position_i: float = param(
         4.0, unit="1/s", lo=0.0, hi=100.0, doc="integral gain on the PD term (0: the thesis's PD)"
     )
@@ -128,9 +136,10 @@ def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
-# thesis section 3.4: the same PD on every axis, no integral
+# thesis section 3.4: the same PD on every axis, unlimited, no integral
 THESIS_GAINS = {
-    "GFX_POS_P": 1.0, "GFX_POS_D": 2.0, "GFX_POS_Z_P": 1.0, "GFX_POS_Z_D": 2.0, "GFX_POS_I": 0.0
+    "GFX_POS_P": 1.0, "GFX_POS_D": 2.0, "GFX_POS_Z_P": 1.0, "GFX_POS_Z_D": 2.0,
+    "GFX_POS_Z_AMAX": 100.0, "GFX_POS_I": 0.0,
 }  # fmt: skip
 
 
@@ -215,11 +224,14 @@ def control(
     e_xy = (a0 * (sp.position_m[0] - p[0]), a0 * (sp.position_m[1] - p[1]))
     if previous_position_term_m_s2 is not None:
         e_xy = jerk_limited(previous_position_term_m_s2, e_xy, dt_s, params)
+    pd_z = params.vertical_p * (sp.position_m[2] - p[2]) + params.vertical_d * (
+        sp.velocity_m_s[2] - v[2]
+    )
+    z_limit = params.vertical_accel_limit_m_s2
     pd = (
         e_xy[0] + a1 * (sp.velocity_m_s[0] - v[0]),
         e_xy[1] + a1 * (sp.velocity_m_s[1] - v[1]),
-        params.vertical_p * (sp.position_m[2] - p[2])
-        + params.vertical_d * (sp.velocity_m_s[2] - v[2]),
+        min(max(pd_z, -z_limit), z_limit),
     )
     ff = sp.acceleration_m_s2
     ax, ay, az = pd[0] + ff[0] + i[0], pd[1] + ff[1] + i[1], pd[2] + ff[2] + i[2]

@@ -110,6 +110,7 @@ NAMES: dict[str, tuple[str, str]] = {
     "GFX_POS_D": ("controller", "position_d"),
     "GFX_POS_Z_P": ("controller", "vertical_p"),
     "GFX_POS_Z_D": ("controller", "vertical_d"),
+    "GFX_POS_Z_AMAX": ("controller", "vertical_accel_limit_m_s2"),
     "GFX_POS_I": ("controller", "position_i"),
     "GFX_POS_I_MAX": ("controller", "integral_limit_m_s2"),
     "GFX_ATT_P": ("controller", "attitude_p"),

@@ -29,7 +29,14 @@ from simbridge.vehicle import GRAVITY_M_S2, load_vehicle
 
 V = load_vehicle()
 # the thesis's gains, the same on every axis
-P = ControllerParams(position_p=1.0, position_d=2.0, vertical_p=1.0, vertical_d=2.0, position_i=0.0)
+P = ControllerParams(
+    position_p=1.0,
+    position_d=2.0,
+    vertical_p=1.0,
+    vertical_d=2.0,
+    vertical_accel_limit_m_s2=100.0,
+    position_i=0.0,
+)
 LEVEL = FlightState((0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
 
@@ -154,8 +161,9 @@ def test_the_integral_sums_the_pd_term_and_stops_when_frozen_or_at_its_limit():
 
 
 def test_a_saturated_command_is_flagged_so_that_the_integral_does_not_wind_up():
-    far_below = Setpoint((0.0, 0.0, -50.0))
-    out = control(LEVEL, far_below, (0.0, 0.0, 0.0), V, ControllerParams())
+    far_below = Setpoint((0.0, 0.0, -50.0))  # asks for a fall faster than 0.8 g
+    unlimited = ControllerParams(vertical_accel_limit_m_s2=100.0)
+    out = control(LEVEL, far_below, (0.0, 0.0, 0.0), V, unlimited)
     assert out.saturated
     near = Setpoint((0.0, 0.0, 1.01))
     out = control(LEVEL, near, (0.0, 0.0, 0.0), V, ControllerParams())
@@ -164,12 +172,17 @@ def test_a_saturated_command_is_flagged_so_that_the_integral_does_not_wind_up():
 
 def test_the_vertical_loop_is_stiffer_than_the_horizontal_one_by_default():
     """a0 = 36, a1 = 12 along z (the spring that holds the vehicle in the ground effect),
-    6 and 6 across; `GFX_POS_Z_*` and `GFX_POS_*` set each."""
+    6 and 6 across; `GFX_POS_Z_*` and `GFX_POS_*` set each; the vertical term is limited."""
     moving = FlightState((0.0, 0.0, 1.0), (0.1, 0.0, 0.1), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
     out = control(moving, Setpoint((0.01, 0.0, 1.01)), (0.0, 0.0, 0.0), V, ControllerParams())
     assert out.pd_acceleration_m_s2 == pytest.approx(
         (6 * 0.01 - 6 * 0.1, 0.0, 36 * 0.01 - 12 * 0.1)
     )
+    # a large error asks for no more than the vertical limit (4 m/s^2), either way
+    far = control(LEVEL, Setpoint((0.0, 0.0, 2.0)), (0.0, 0.0, 0.0), V, ControllerParams())
+    assert far.pd_acceleration_m_s2[2] == 4.0 and not far.saturated
+    far = control(LEVEL, Setpoint((0.0, 0.0, 0.5)), (0.0, 0.0, 0.0), V, ControllerParams())
+    assert far.pd_acceleration_m_s2[2] == -4.0
     soft = ControllerParams(vertical_p=6.0, vertical_d=6.0)
     out = control(moving, Setpoint((0.01, 0.0, 1.01)), (0.0, 0.0, 0.0), V, soft)
     assert out.pd_acceleration_m_s2[2] == pytest.approx(6 * 0.01 - 6 * 0.1)
