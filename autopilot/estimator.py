@@ -310,6 +310,17 @@ def _updated(est: Estimate, dx: np.ndarray, p_new: np.ndarray) -> Estimate:
     )
 
 
+def _gain(ph: np.ndarray, s: np.ndarray) -> np.ndarray | None:
+    """The Kalman gain P h^T S^-1, or None where S cannot be inverted: a covariance gone
+    singular or infinite (a vehicle tumbling on the ground) refuses the measurement, as the
+    gate refuses an outlier, instead of ending the flight's loop with an exception."""
+    try:
+        k = ph @ np.linalg.inv(s)
+    except np.linalg.LinAlgError:
+        return None
+    return k if np.isfinite(k).all() else None
+
+
 def correct(
     est: Estimate, innovation: np.ndarray, h: np.ndarray, variance: np.ndarray, gate_sd: float
 ) -> Fused:
@@ -319,9 +330,9 @@ def correct(
     ph = p @ h.T
     s = h @ ph + np.diag(variance)
     ratio = float(np.max(innovation * innovation / (gate_sd * gate_sd * np.diag(s))))
-    if not ratio <= 1.0:  # NaN is rejected too
+    k = _gain(ph, s) if ratio <= 1.0 else None  # NaN is rejected too
+    if k is None:
         return Fused(est, ratio, False)
-    k = ph @ np.linalg.inv(s)
     return Fused(_updated(est, k @ innovation, p - k @ ph.T), ratio, True)
 
 
@@ -345,9 +356,9 @@ def correct_states(
     m = len(states)
     s.flat[:: m + 1] += variance
     ratio = float(np.max(innovation * innovation / (gate_sd * gate_sd * s.flat[:: m + 1])))
-    if not ratio <= 1.0:  # NaN is rejected too
+    k = _gain(ph, s) if ratio <= 1.0 else None  # NaN is rejected too
+    if k is None:
         return Fused(est, ratio, False)
-    k = ph @ np.linalg.inv(s)
     return Fused(_updated(est, k @ innovation, p - k @ ph.T), ratio, True)
 
 
@@ -434,9 +445,9 @@ def fuse_pose(
     variances = s.flat[:: k + 2].tolist()
     ratios = [nu * nu / (gate2 * var) for nu, var in zip(innovation, variances, strict=True)]
     ratio = math.nan if any(r != r for r in ratios) else max(ratios)  # NaN is rejected too
-    if not ratio <= 1.0:
+    gain = _gain(ph, s) if ratio <= 1.0 else None
+    if gain is None:
         return Fused(est, ratio, False)
-    gain = ph @ np.linalg.inv(s)
     return Fused(_updated(est, gain @ innovation, p - gain @ ph.T), ratio, True)
 
 

@@ -3,6 +3,7 @@ floor, and the simulated sensors' errors."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -83,6 +84,18 @@ def test_an_outlier_is_rejected_by_the_innovation_gate_and_changes_nothing():
     assert near.estimate.position_m[2] > 1.0
     nan = ekf.fuse_height(est, math.nan, 0.0, 0.01, 5.0)
     assert not nan.accepted
+
+
+def test_a_covariance_gone_singular_refuses_a_measurement_instead_of_raising():
+    """A tumbling vehicle's filter can reach a covariance whose innovation covariance has no
+    inverse; the pose and position fusions then refuse the measurement (counted as such),
+    and the flight's loop goes on to its failsafes."""
+    est = at_rest()
+    flat = dataclasses.replace(est, covariance=np.ones_like(est.covariance))  # rank one
+    pose = ekf.fuse_pose(flat, np.zeros(3), [0, 1, 2], 0.0, 0.0, 0.0, 5.0)
+    assert not pose.accepted and pose.estimate is flat
+    position = ekf.fuse_position(flat, est.position_m, est.position_m, np.zeros(3), 5.0)
+    assert not position.accepted and position.estimate is flat
 
 
 def test_a_position_reset_moves_the_position_and_forgets_its_correlations():
