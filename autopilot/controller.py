@@ -58,10 +58,10 @@ class ControllerParams:
     0.4 N s/m, 46/s^2 and 15/s per mass, and 15/s^2 and 7.4/s horizontally: vertical loops
     of nano quadrotors are stiffer than horizontal ones. Horizontally the loop shapes the
     path (the setpoint's lead, the jerk limit) and meets no such gradient. The vertical PD
-    term asks for at most 4 m/s^2 up or down (PX4's MPC_ACC_UP_MAX): a stiff loop answers a
-    large error with a large thrust step, and rotors that spin down slowly (a propeller
-    coasting 0.8 s) turn those steps into a growing vertical oscillation; in a hold the
-    term is a hundredth of that. With the integral the poles are at -0.95 and -2.5 +- 4.3j
+    term asks for at most 4 m/s^2 up or down (the value of PX4's MPC_ACC_UP_MAX): a stiff
+    loop answers a large error with a large thrust step, and rotors that spin down slowly
+    (a propeller coasting 0.8 s) turn those steps into a growing vertical oscillation; in a
+    hold the term is a hundredth of that. With the integral the poles are at -0.95 and -2.5 +- 4.3j
     horizontally, -2.3 and -4.8 +- 6.2j vertically.
     The thesis's pure PD (a0 = 1, a1 = 2 on every axis, no integral) is `THESIS_GAINS`.
     Attitude: the thesis used 1 and 2, which makes the inner loop no faster than the outer
