@@ -10,6 +10,7 @@ from collections import deque
 import numpy as np
 
 from autopilot import estimator as ekf
+from autopilot.attitude import rotation_vector_floats
 from simbridge.frames import Quat, Vec3, quat_conjugate, quat_multiply, quat_normalize
 
 
@@ -35,7 +36,7 @@ class PredictionHistory:
         bx, by, bz = before.position_m.tolist()
         self._moved = (mx + (px - bx), my + (py - by), mz + (pz - bz))
         wx, wy, wz = predicted.angular_velocity_body_rad_s.tolist()
-        turn = ekf.rotation_vector_floats(wx * dt, wy * dt, wz * dt)
+        turn = rotation_vector_floats(wx * dt, wy * dt, wz * dt)
         self._turned = quat_normalize(quat_multiply(self._turned, turn))
         self.record(time_us)
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from autopilot import estimator as ekf
+from autopilot.attitude import attitude_from_gravity_and_field, yaw_of
 from autopilot.controller import FlightState
 from autopilot.estimator_params import (
     EV_HPOS,
@@ -240,7 +241,7 @@ class Navigation:
             q = np.array(quat_ned_frd_to_enu_flu(tuple(mocap["q"])))
             attitude_sd = p.ev_att_noise_rad
         else:
-            q = ekf.attitude_from_gravity_and_field(
+            q = attitude_from_gravity_and_field(
                 np.array(imu.specific_force), np.array(imu.field), self._field_world()
             )
             attitude_sd = 0.05
@@ -295,7 +296,7 @@ class Navigation:
         yaw = None
         if p.ev_ctrl & EV_YAW:
             q = quat_ned_frd_to_enu_flu(tuple(m["q"]))
-            yaw = ekf.yaw_of(np.array(q)) - ekf.yaw_of(attitude)
+            yaw = yaw_of(np.array(q)) - yaw_of(attitude)
         if axes or yaw is not None:
             innovation = (measured - position)[axes]
             fused = ekf.fuse_pose(

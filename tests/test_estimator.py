@@ -10,6 +10,12 @@ import numpy as np
 import pytest
 
 from autopilot import estimator as ekf
+from autopilot.attitude import (
+    attitude_from_gravity_and_field,
+    quat_mul,
+    rotation,
+    rotation_vector_quat,
+)
 from autopilot.commander import CommanderParams, CommanderState, Phase, command
 from autopilot.land_detector import LandDetector, LandDetectorParams, ground_contact
 from autopilot.modes import FlightMode
@@ -61,7 +67,7 @@ def test_motion_capture_corrections_find_the_accelerometer_bias_and_hold_the_pos
             measured = truth + rng.normal(0, 0.001, 3)
             fused = ekf.fuse_position(est, measured, est.position_m, np.full(3, 0.002), 5.0)
             est = fused.estimate
-            attitude = ekf.quat_mul(LEVEL, ekf.rotation_vector_quat(rng.normal(0, 0.0017, 3)))
+            attitude = quat_mul(LEVEL, rotation_vector_quat(rng.normal(0, 0.0017, 3)))
             est = ekf.fuse_attitude(est, attitude, est.quaternion, 0.005, 5.0).estimate
         if k > 250 * 20:
             worst = max(worst, float(np.linalg.norm(est.position_m - truth)))
@@ -113,7 +119,7 @@ def test_a_position_reset_moves_the_position_and_forgets_its_correlations():
 
 
 def test_the_heading_of_a_magnetometer_corrects_the_yaw():
-    yawed = ekf.rotation_vector_quat(np.array([0.0, 0.0, 0.2]))
+    yawed = rotation_vector_quat(np.array([0.0, 0.0, 0.2]))
     est = ekf.initial(0, np.zeros(3), yawed, 0.01, attitude_sd_rad=0.3)
     field_world = np.array([0.0, 1.0, 0.0])  # north
     field_body = field_world  # a level vehicle facing east: the truth has no yaw
@@ -123,10 +129,10 @@ def test_the_heading_of_a_magnetometer_corrects_the_yaw():
 
 
 def test_the_attitude_at_rest_comes_from_gravity_and_the_field():
-    q_true = ekf.rotation_vector_quat(np.array([0.1, -0.05, 0.7]))
-    r = ekf.rotation(q_true)
+    q_true = rotation_vector_quat(np.array([0.1, -0.05, 0.7]))
+    r = rotation(q_true)
     field_world = np.array([0.1, 0.9, -0.4])
-    q = ekf.attitude_from_gravity_and_field(
+    q = attitude_from_gravity_and_field(
         r.T @ np.array([0, 0, GRAVITY_M_S2]), r.T @ field_world, field_world
     )
     assert abs(float(np.dot(q, q_true))) == pytest.approx(1.0, abs=1e-9)
