@@ -85,7 +85,7 @@ def matrix_quat(r: np.ndarray) -> np.ndarray:
     return out / np.linalg.norm(out) * (1.0 if out[0] >= 0 else -1.0)
 
 
-def yaw_of(q: np.ndarray) -> float:
+def yaw_of(q: np.ndarray | tuple[float, ...]) -> float:
     """The heading of a (w, x, y, z) quaternion: the body x axis from world east, ccw."""
     w, x, y, z = _floats(q)
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

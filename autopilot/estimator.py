@@ -158,24 +158,41 @@ _IDENTITY = np.eye(N_ERRORS)
 def predict_covariance(
     est: Estimate,
     dt: float,
-    specific_force_body: np.ndarray,
-    rates_body: np.ndarray,
+    specific_force_body: Vec3 | np.ndarray,
+    rates_body: Vec3 | np.ndarray,
     noise: ProcessNoise,
 ) -> Estimate:
     """Propagate the covariance over `dt` with the mean IMU sample of that interval (PX4's
-    EKF2 predicts its covariance at 100 Hz from the accumulated IMU deltas)."""
+    EKF2 predicts its covariance at 100 Hz from the accumulated IMU deltas). The Jacobian's
+    blocks are written out in floats: a dozen 3 x 3 array operations cost more than the
+    15 x 15 products."""
     if dt <= 0.0:
         return est
-    r = rotation(est.quaternion)
-    f = specific_force_body - est.accel_bias_m_s2
-    w = (rates_body - est.gyro_bias_rad_s) * dt
+    w, x, y, z = est.quaternion.tolist()
+    r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+    r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+    r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    bax, bay, baz = est.accel_bias_m_s2.tolist()
+    bgx, bgy, bgz = est.gyro_bias_rad_s.tolist()
+    fx_, fy_, fz_ = specific_force_body
+    fx_, fy_, fz_ = fx_ - bax, fy_ - bay, fz_ - baz
+    wx, wy, wz = rates_body
+    wx, wy, wz = (wx - bgx) * dt, (wy - bgy) * dt, (wz - bgz) * dt
     fx = _IDENTITY.copy()
     # diagonals by flat strides (row stride 15, so 16 steps along a diagonal): fancy indexing
     # costs several times more on these small arrays
     fx.flat[3:48:16] = dt  # dp/dv
-    fx[V_, TH_] = -(r @ skew(f)) * dt
-    fx[V_, BA_] = -r * dt
-    fx[TH_, TH_] -= skew(w)  # exp(-[w dt]x) to first order: w dt is milliradians
+    # dv/dtheta = -R [f]x dt and dv/dba = -R dt, side by side
+    fx[V_, 6:12] = (
+        (-(r01 * fz_ - r02 * fy_) * dt, -(r02 * fx_ - r00 * fz_) * dt,
+         -(r00 * fy_ - r01 * fx_) * dt, -r00 * dt, -r01 * dt, -r02 * dt),
+        (-(r11 * fz_ - r12 * fy_) * dt, -(r12 * fx_ - r10 * fz_) * dt,
+         -(r10 * fy_ - r11 * fx_) * dt, -r10 * dt, -r11 * dt, -r12 * dt),
+        (-(r21 * fz_ - r22 * fy_) * dt, -(r22 * fx_ - r20 * fz_) * dt,
+         -(r20 * fy_ - r21 * fx_) * dt, -r20 * dt, -r21 * dt, -r22 * dt),
+    )  # fmt: skip
+    # exp(-[w dt]x) to first order: w dt is milliradians
+    fx[TH_, TH_] = ((1.0, wz, -wy), (-wz, 1.0, wx), (wy, -wx, 1.0))
     fx.flat[102:135:16] = -dt  # dtheta/dbg
     p = fx @ est.covariance @ fx.T
     p.flat[48::16] += _process_variances(noise) * dt  # the diagonal from state 3 on
@@ -344,32 +361,35 @@ def fuse_pose(
         variance = np.full(len(axes), position_sd_m * position_sd_m)
         return correct_states(est, position_innovation_m, axes, variance, gate_sd)
     # h: the position axes' rows select states; the yaw row is R's last row on the angle
-    # error (a body rotation turns the heading by (R dtheta)_z). The products with h written
-    # out: this runs at the capture system's rate.
-    k = len(axes)
-    p = est.covariance
+    # error (a body rotation turns the heading by (R dtheta)_z). This runs at the capture
+    # system's rate, so in as few array operations as the update allows.
+    m = len(axes) + 1
     w, x, y, z = est.quaternion.tolist()
-    hy = np.array((2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))  # R[2]
-    # position axes from x on (x, y or x, y, z: a slice, a view) or any (fancy indexing)
-    rows = slice(0, k) if axes == list(range(k)) else axes
-    ph = np.empty((N_ERRORS, k + 1))
-    ph[:, :k] = p[:, rows]
-    ph[:, k] = p[:, TH_] @ hy
-    s = np.empty((k + 1, k + 1))
-    s[:k, :] = ph[rows, :]
-    s[k, :] = hy @ ph[TH_, :]
+    h = _pose_rows(tuple(axes)).copy()
+    h[-1, TH_] = (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y))  # R[2]
+    p = est.covariance
+    ph = p @ h.T
+    s = h @ ph
     position_var = position_sd_m * position_sd_m
-    s.flat[:: k + 2] += [position_var] * k + [yaw_sd_rad * yaw_sd_rad]
+    s.flat[:: m + 1] += [position_var] * (m - 1) + [yaw_sd_rad * yaw_sd_rad]
     innovation = np.asarray(position_innovation_m, dtype=float).tolist()
     innovation.append((yaw_innovation_rad + math.pi) % (2.0 * math.pi) - math.pi)
     gate2 = gate_sd * gate_sd
-    variances = s.flat[:: k + 2].tolist()
+    variances = s.flat[:: m + 1].tolist()
     ratios = [nu * nu / (gate2 * var) for nu, var in zip(innovation, variances, strict=True)]
     ratio = math.nan if any(r != r for r in ratios) else max(ratios)  # NaN is rejected too
     gain = _gain(ph, s) if ratio <= 1.0 else None
     if gain is None:
         return Fused(est, ratio, False)
     return Fused(_updated(est, gain @ innovation, p - gain @ ph.T), ratio, True)
+
+
+@functools.lru_cache(maxsize=8)
+def _pose_rows(axes: tuple[int, ...]) -> np.ndarray:
+    """A pose's measurement rows with the position axes' ones set, the yaw row to fill."""
+    h = np.zeros((len(axes) + 1, N_ERRORS))
+    h[range(len(axes)), axes] = 1.0
+    return h
 
 
 def reset_position(

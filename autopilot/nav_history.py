@@ -7,8 +7,6 @@ from __future__ import annotations
 
 from collections import deque
 
-import numpy as np
-
 from autopilot import estimator as ekf
 from autopilot.attitude import rotation_vector_floats
 from simbridge.frames import Quat, Vec3, quat_conjugate, quat_multiply, quat_normalize
@@ -40,16 +38,18 @@ class PredictionHistory:
         self._turned = quat_normalize(quat_multiply(self._turned, turn))
         self.record(time_us)
 
-    def at_capture(self, estimate: ekf.Estimate, capture_us: int) -> tuple[np.ndarray, np.ndarray]:
-        """The filter's position and attitude at `capture_us`: `estimate` less what the
-        predictions moved and turned since (the oldest recorded, if it is older still)."""
+    def at_capture(self, estimate: ekf.Estimate, capture_us: int) -> tuple[Vec3, Quat]:
+        """The filter's position and attitude at `capture_us`, in floats: `estimate` less
+        what the predictions moved and turned since (the oldest recorded, if it is older
+        still)."""
         then = self._entries[0]
         for entry in reversed(self._entries):
             if entry[0] <= capture_us:
                 then = entry
                 break
         now = self._entries[-1]
-        moved = [a - b for a, b in zip(now[1], then[1], strict=True)]
-        position = estimate.position_m - np.array(moved)
+        px, py, pz = estimate.position_m.tolist()
+        (nx, ny, nz), (tx, ty, tz) = now[1], then[1]
+        position = (px - (nx - tx), py - (ny - ty), pz - (nz - tz))
         back = quat_multiply(quat_conjugate(now[2]), then[2])
-        return position, np.array(quat_multiply(tuple(estimate.quaternion.tolist()), back))
+        return position, quat_multiply(tuple(estimate.quaternion.tolist()), back)

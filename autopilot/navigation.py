@@ -36,7 +36,7 @@ from autopilot.nav_history import PredictionHistory
 from autopilot.sensors import Imu, imu_from, pressure_altitude_m, range_reading
 from autopilot.simlink import Step
 from autopilot.terrain import Terrain, terrain_update
-from simbridge.frames import geodetic_to_local, ned_to_enu, quat_ned_frd_to_enu_flu
+from simbridge.frames import Vec3, geodetic_to_local, ned_to_enu, quat_ned_frd_to_enu_flu
 
 RESTING_SD_M = 0.0005  # how well a standing vehicle knows the surface under it
 BARO_REF_STEPS = 250.0  # the barometer's reference averages its offset over about a second
@@ -81,8 +81,8 @@ class Navigation:
         self._steps = 0
         self._pending_dt = 0.0  # IMU time not yet in the covariance, and its sums
         self._baro_sum, self._baro_n = 0.0, 0  # barometer innovations since the last fusion
-        self._pending_f = np.zeros(3)
-        self._pending_w = np.zeros(3)
+        self._pending_f: Vec3 = (0.0, 0.0, 0.0)
+        self._pending_w: Vec3 = (0.0, 0.0, 0.0)
         self._last_seen: dict[str, float] = {}
         self._mocap_fused_s: float | None = None  # the last pose that passed the gate
         self.terrain = Terrain()
@@ -171,8 +171,10 @@ class Navigation:
         self._steps += 1
         # the covariance follows at COVARIANCE_PERIOD_S from the IMU's mean over the interval
         self._pending_dt += dt
-        self._pending_f += np.array(imu.specific_force) * dt
-        self._pending_w += np.array(imu.rates) * dt
+        (sx, sy, sz), (fx, fy, fz) = self._pending_f, imu.specific_force
+        self._pending_f = (sx + fx * dt, sy + fy * dt, sz + fz * dt)
+        (sx, sy, sz), (wx, wy, wz) = self._pending_w, imu.rates
+        self._pending_w = (sx + wx * dt, sy + wy * dt, sz + wz * dt)
         if self._pending_dt >= COVARIANCE_PERIOD_S:
             self._sync()
         # what the prediction moved and turned, for measurements captured in the past
@@ -211,12 +213,17 @@ class Navigation:
         if dt <= 0.0:
             return
         assert self.estimate is not None
+        (fx, fy, fz), (wx, wy, wz) = self._pending_f, self._pending_w
         self.estimate = ekf.predict_covariance(
-            self.estimate, min(dt, 0.1), self._pending_f / dt, self._pending_w / dt, self.noise
+            self.estimate,
+            min(dt, 0.1),
+            (fx / dt, fy / dt, fz / dt),
+            (wx / dt, wy / dt, wz / dt),
+            self.noise,
         )
         self._pending_dt = 0.0
-        self._pending_f = np.zeros(3)
-        self._pending_w = np.zeros(3)
+        self._pending_f = (0.0, 0.0, 0.0)
+        self._pending_w = (0.0, 0.0, 0.0)
 
     def _fuse(self, source: str, fused: ekf.Fused) -> bool:
         self.quality.note(source, fused)
@@ -289,16 +296,15 @@ class Navigation:
         p = self.params
         self._last_seen["motion capture"] = t
         position, attitude = self._history.at_capture(self.estimate, m["time_usec"])
-        measured = np.array(ned_to_enu((m["x"], m["y"], m["z"])))
+        measured = ned_to_enu((m["x"], m["y"], m["z"]))
         axes = ([0, 1] if p.ev_ctrl & EV_HPOS else []) + (
             [2] if p.ev_ctrl & EV_VPOS and self.height_source == "vision" else []
         )
         yaw = None
         if p.ev_ctrl & EV_YAW:
-            q = quat_ned_frd_to_enu_flu(tuple(m["q"]))
-            yaw = yaw_of(np.array(q)) - yaw_of(attitude)
+            yaw = yaw_of(quat_ned_frd_to_enu_flu(tuple(m["q"]))) - yaw_of(attitude)
         if axes or yaw is not None:
-            innovation = (measured - position)[axes]
+            innovation = np.array([measured[a] - position[a] for a in axes])
             fused = ekf.fuse_pose(
                 self.estimate, innovation, axes, p.ev_pos_noise_m, yaw, p.ev_att_noise_rad,
                 p.gate_sd,
@@ -334,7 +340,7 @@ class Navigation:
             measured = np.array(self._gps_position(g))
             sd = np.array([p.gps_pos_noise_m, p.gps_pos_noise_m, 1.6 * p.gps_pos_noise_m])
             self._fuse("GPS position", ekf.fuse_position(
-                self.estimate, measured, position, sd, p.gate_sd, axes
+                self.estimate, measured, np.array(position), sd, p.gate_sd, axes
             ))  # fmt: skip
         if p.gps_ctrl & GPS_VEL:
             v = np.array(ned_to_enu((g["vn"] * 0.01, g["ve"] * 0.01, g["vd"] * 0.01)))
