@@ -151,20 +151,29 @@ class HilEncoder:
         self._position_bias = bias.position_bias_m if bias else zero
         self._mag_enu = ned_to_enu(world.origin.magnetic_field_ned_gauss)
         rates = world.sensors
-        self._every = {
-            "gps": world.every_steps(rates.gps_hz),
-            "odometry": world.every_steps(rates.odometry_hz),
-            "distance": world.every_steps(rates.distance_sensor_hz),
-            "esc": world.every_steps(rates.esc_hz),
-            "truth": world.every_steps(rates.truth_hz),
+        self._per_step = {
+            "gps": world.samples_per_step(rates.gps_hz),
+            "odometry": world.samples_per_step(rates.odometry_hz),
+            "distance": world.samples_per_step(rates.distance_sensor_hz),
+            "esc": world.samples_per_step(rates.esc_hz),
+            "truth": world.samples_per_step(rates.truth_hz),
         }
+        # the step of the last range-and-flow sample (the first integrates one nominal period)
+        per_step = self._per_step["distance"]
+        self._distance_step = -max(1, round(1.0 / per_step)) if per_step > 0.0 else 0
         self._steps = 0
         self._period_us = world.control_period_us
         self._rest: list[Frame] = []  # the tick's messages after HIL_SENSOR, packed later
 
     def _due(self, name: str) -> bool:
-        k = self._every[name]
-        return k > 0 and self._steps % k == 0
+        """Whether the sensor's own clock began a period at this step: it samples at its
+        rate on average, not at a rate rounded to a whole number of steps."""
+        rate = self._per_step[name]
+        if rate <= 0.0:
+            return False
+        n = self._steps
+        # the tolerance keeps whole-step periods (50 Hz at 250 Hz: every 5th) exact in floats
+        return n == 0 or math.floor(n * rate + 1e-9) > math.floor((n - 1) * rate + 1e-9)
 
     def encode(self, state: VehicleState, time_us: int, truth: EffectForces | None = None) -> bytes:
         """All messages of one control step at `time_us`, in the order the simulator sends
@@ -380,7 +389,11 @@ class HilEncoder:
         Flow is integrated over the message interval from the current rates and velocity
         (sensor frame = body FRD): x = (p - v_y / h) dt, y = (q + v_x / h) dt.
         """
-        dt = self._every["distance"] * self.world.control_period_s
+        # integrated since the last sample (at a rate that is no whole number of steps, the
+        # interval alternates)
+        steps = max(1, self._steps - self._distance_step)
+        self._distance_step = self._steps
+        dt = steps * self.world.control_period_s
         rates = flu_to_frd(s.angular_velocity_body_rad_s)
         v = flu_to_frd(rotate_transposed(quat_to_matrix(s.quaternion), s.velocity_m_s))
         h = s.range_m

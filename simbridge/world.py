@@ -113,7 +113,9 @@ OBSTACLE_KINDS: dict[str, type] = {"box": Box, "wall": Wall, "step": Step}
 class SensorRates:
     """Rates of the HIL messages besides HIL_SENSOR and HIL_STATE_QUATERNION (every step).
 
-    A rate becomes 'every k-th control step'; at 250 Hz, 125, 83.3, 62.5 and 50 Hz are exact.
+    A sensor samples on the first control step of each of its own periods, so its mean rate is
+    the one given (100 Hz at a 250 Hz control rate: every 2nd and 3rd step in turn); rates
+    above the control rate give a message every step.
     """
 
     gps_hz: float = param(10.0, unit="Hz", lo=0.0, hi=1000.0, doc="HIL_GPS; 0 disables")
@@ -185,11 +187,9 @@ class World:
     def control_period_us(self) -> int:
         return round(self.control_period_s * 1e6)
 
-    def every_steps(self, rate_hz: float) -> int:
-        """A message rate as 'every k-th control step' (0: never)."""
-        if rate_hz <= 0.0:
-            return 0
-        return max(1, round(1.0 / (rate_hz * self.control_period_s)))
+    def samples_per_step(self, rate_hz: float) -> float:
+        """A message rate in samples per control step (0: never; above 1: every step)."""
+        return max(0.0, rate_hz) * self.control_period_s
 
 
 def resolve_world_path(name_or_path: str | Path) -> Path:

@@ -141,9 +141,12 @@ def test_true_and_predicted_ground_effect_are_both_recorded(flown):
     _, mode = recording.scalars("plots/mode")
     holding = np.flatnonzero(mode[:, 0] == MODES.index("holding"))
     low = t_pred[holding[-1]]  # the end of the hold 3 cm above the box
-    i, j = np.searchsorted(t_true, low), np.searchsorted(t_pred, low)
-    assert true_z[i, 0] > 0.05  # the box's ground effect, in newtons
-    assert predicted_z[j, 0] == pytest.approx(true_z[i, 0], rel=0.05)  # the analytic expert
+    # its last 2 s: the prediction is made at the estimated height, and at 3 cm a millimetre
+    # of the estimator's error is 7% of the force (the error is slow: averaged, it is ~0.3 mm)
+    true_mean = true_z[(t_true > low - 2.0) & (t_true <= low), 0].mean()
+    predicted_mean = predicted_z[(t_pred > low - 2.0) & (t_pred <= low), 0].mean()
+    assert true_mean > 0.05  # the box's ground effect, in newtons
+    assert predicted_mean == pytest.approx(true_mean, rel=0.05)  # the analytic expert
     arrows = recording.values("world/ground_effect/true", "Arrows3D:vectors")
     assert arrows[:, 2].max() > 0.05
 
