@@ -130,11 +130,17 @@ def pingpong_rtf(
         hover_fraction(vehicle.hover_rotor_speed_rad_s, vehicle.max_rotor_speed_rad_s)
     )
     wall = _lockstep(int(line.rsplit(":", 1)[1]), steps, command)
-    finish(proc)
+    report = finish(proc)
     return {
         "pingpong_rtf": steps * control_period_s / wall,
         "pingpong_us_per_step": wall / steps * 1e6,
+        "pingpong_report": report,
     }
+
+
+def wake_latency(report: str) -> str:
+    """What a simulator's or the reference's last line says of the CPU wake-up latency."""
+    return next((part.strip() for part in report.split(";") if "wake-up latency" in part), "")
 
 
 def bench_sim(
@@ -168,6 +174,9 @@ def bench_sim(
         "repeat": repeat,
         **{key: statistics.median(values) for key, values in runs.items()},
         "sim_report": last["sim_report"],
+        "pingpong_report": last["pingpong_report"],
+        # both lockstep loops ran with the same CPU wake-up latency (simbridge/cpu_latency.py)
+        "cpu_wake_latency": wake_latency(last["sim_report"]),
         "physics_runs": runs["physics_rtf"],
         "lockstep_runs": runs["lockstep_rtf"],
     }

@@ -5,7 +5,9 @@ written with pymavlink would: its own connection (`mavutil`, `tcpin:`), and each
 very messages our simulator sends for such a step (taken from a short flight of the real
 encoder beforehand, then cycled) sent with `mav.send`, then the client's
 HIL_ACTUATOR_CONTROLS awaited with `recv_match`. No physics, no sensors: what the wire and
-pymavlink cost. `groundfx bench sim` runs the same minimal client against both.
+pymavlink cost. `groundfx bench sim` runs the same minimal client against both. It holds the
+same CPU wake-up latency request as the simulator does at full speed (simbridge/cpu_latency.py),
+so that the reference and the measured loop wake up alike.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from typing import Any
 
 from pymavlink import mavutil
 
+from simbridge.cpu_latency import CpuLatencyRequest
 from simbridge.hil import HilEncoder, mavlink
 from simbridge.physics import Simulation
 from simbridge.vehicle import load_vehicle
@@ -58,6 +61,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--world", default="default")
     p.add_argument("--steps", type=int, required=True, help="steps to serve")
     p.add_argument("--altitude", type=float, default=0.1, help="hover height of the sample, m")
+    p.add_argument(
+        "--low-latency-idle",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="hold the CPU wake-up latency request while serving, as `groundfx sim` does",
+    )
     args = p.parse_args(argv)
     steps = sample_steps(args.world, args.altitude)
     conn = mavutil.mavlink_connection("tcpin:127.0.0.1:0", source_system=1, source_component=200)
@@ -65,11 +74,13 @@ def main(argv: list[str] | None = None) -> int:
     while conn.port is None:  # mavutil accepts in recv, and drops what is sent before
         conn.select(0.05)
         conn.recv()
-    t0 = time.perf_counter()
-    served = serve(conn, steps, args.steps, timeout_s=10.0)
-    wall = time.perf_counter() - t0
+    with CpuLatencyRequest(0, not_asked="" if args.low_latency_idle else "declined") as request:
+        latency = request.describe()
+        t0 = time.perf_counter()
+        served = serve(conn, steps, args.steps, timeout_s=10.0)
+        wall = time.perf_counter() - t0
     conn.close()
-    print(f"groundfx pingpong: {served} steps in {wall:.2f} s", flush=True)
+    print(f"groundfx pingpong: {served} steps in {wall:.2f} s; {latency}", flush=True)
     return 0
 
 

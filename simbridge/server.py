@@ -18,6 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from simbridge import transport
+from simbridge.cpu_latency import CpuLatencyRequest
 from simbridge.hil import ActuatorCommand, HilEncoder, decode_actuators, mavlink
 from simbridge.physics import Simulation
 from simbridge.vehicle import Vehicle
@@ -37,6 +38,9 @@ class ServerOptions:
     # Flights are then the same to the bit however slowly the autopilot starts; PX4 needs its
     # clock running before it replies, so by default the clock runs in real time until then.
     lockstep_start: bool = False
+    # As fast as possible, hold the kernel's CPU wake-up latency request while an autopilot
+    # is served (simbridge/cpu_latency.py): lockstep then pays no halted-CPU wake-ups
+    low_latency_idle: bool = True
 
 
 @dataclass
@@ -73,6 +77,7 @@ class SimServer:
         self._listener: socket.socket | None = None
         self.sim_time_s = 0.0
         self.wall_s = 0.0
+        self.idle_latency = ""  # what became of the wake-up latency request, for the summary
 
     def listen(self) -> str:
         """Bind and listen; returns the URL an autopilot connects to (`tcp:HOST:PORT`, the
@@ -101,7 +106,9 @@ class SimServer:
                     self._recv_timeout_s = 0.0
                     self.counters, self._reader = LinkCounters(), FrameReader(mavlink)
                     try:
-                        self._run(conn, sim)
+                        with self._latency_request() as request:
+                            self.idle_latency = request.describe()
+                            self._run(conn, sim)
                     except LinkEnded as end:
                         if not self.options.wait:
                             return end
@@ -115,13 +122,22 @@ class SimServer:
                 with contextlib.suppress(OSError):
                     os.unlink(self.options.unix_path)
 
+    def _latency_request(self) -> CpuLatencyRequest:
+        """The wake-up latency request for one autopilot's run: asked for only as fast as
+        possible (a paced run waits on its clock anyway) and unless declined."""
+        o = self.options
+        if o.speedup is not None:
+            return CpuLatencyRequest(0, not_asked="a paced run")
+        return CpuLatencyRequest(0, not_asked="" if o.low_latency_idle else "declined")
+
     def summary(self, reason: str) -> str:
         c = self.counters
         rtf = self.sim_time_s / self.wall_s if self.wall_s > 0 else 0.0
+        latency = f"; {self.idle_latency}" if self.idle_latency else ""
         return (
             f"{reason}; {c.steps} steps, {self.sim_time_s:.3f} s simulated in {self.wall_s:.2f} s "
             f"wall ({rtf:.1f}x real time); dropped {c.malformed} malformed and {c.unknown} unknown "
-            f"messages; clamped {c.clamped} actuator values"
+            f"messages; clamped {c.clamped} actuator values{latency}"
         )
 
     # -- the loop -------------------------------------------------------------------------

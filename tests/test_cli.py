@@ -34,6 +34,9 @@ def test_bench_sim_prints_its_figures_as_json():
     assert figures["control_hz"] == 250
     assert figures["physics_altitude_drift_m"] < 1e-3  # it benchmarks a hovering drone
     assert "autopilot disconnected; 250 steps" in figures["sim_report"]
+    # the loop and its reference wake up alike: both say what became of the latency request
+    assert figures["cpu_wake_latency"].startswith("CPU wake-up latency")
+    assert figures["cpu_wake_latency"] in figures["pingpong_report"]
 
 
 def test_demo_shows_the_ground_effect_lifting_the_drone(tmp_path):

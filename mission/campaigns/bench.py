@@ -11,7 +11,7 @@ from typing import Any
 
 from mission import EXAMPLES_DIR
 from mission.fly import fly
-from simbridge.bench import pingpong_rtf
+from simbridge.bench import pingpong_rtf, wake_latency
 from simbridge.vehicle import load_vehicle
 from simbridge.world import load_world, resolve_world_path
 
@@ -86,6 +86,8 @@ def bench_sitl(world: str = "default", repeat: int = 5) -> dict[str, Any]:
         "rtf_runs_off": [s["rtf"] for s in off],
         "rtf_runs_on": [s["rtf"] for s in on],
         "pingpong_rtf": statistics.median(reference),
+        # the flights and the reference alike (simbridge/cpu_latency.py)
+        "cpu_wake_latency": wake_latency(median.get("simulator") or ""),
         "recording_on_to_pingpong": rtf_on / statistics.median(reference),
         "load_average": (load_before, os.getloadavg()[0]),
     }

@@ -98,6 +98,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             f"pymavlink ping-pong {r['pingpong_rtf']:.1f}x "
             f"({r['pingpong_us_per_step']:.0f} us): {r['lockstep_ratio']:.2f} of it"
         )
+        print(f"both lockstep loops: {r['cpu_wake_latency'] or 'CPU wake-up latency unknown'}")
         print(
             f"medians of {r['repeat']} interleaved runs; load average "
             f"{r['load_average'][0]:.2f} before, {r['load_average'][1]:.2f} after"

@@ -68,6 +68,16 @@ def add_parser(sub: Any) -> None:
         help="wait for the autopilot's reply to the first state before the clock runs "
         "(reproducible flights; not for PX4, which needs a running clock to boot)",
     )
+    p.add_argument(
+        "--low-latency-idle",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="as fast as possible (--speedup max), hold the kernel's CPU wake-up latency "
+        "request (/dev/cpu_dma_latency at 0 us) while an autopilot is served, so that "
+        "lockstep pays no halted-CPU wake-ups; idle CPUs then spin in the kernel's idle "
+        "loop meanwhile (power). Needs root; without it the flight runs as before "
+        "(default: on)",
+    )
     p.set_defaults(func=cmd_sim)
 
 
@@ -99,6 +109,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
             timeout_s=args.timeout,
             wait=args.wait,
             lockstep_start=args.lockstep_start,
+            low_latency_idle=args.low_latency_idle,
         ),
     )
     try:
