@@ -41,6 +41,7 @@ class CpuLatencyRequest:
         self.latency_us = latency_us
         self.device = device
         self._fd: int | None = None
+        self._granted = False  # the kernel took it (still true after the request ends)
         self.reason = not_asked
 
     @property
@@ -61,7 +62,7 @@ class CpuLatencyRequest:
             os.close(fd)
             self.reason = f"{self.device}: {(err.strerror or str(err)).lower()}"
             return self
-        self._fd = fd
+        self._fd, self._granted = fd, True
         return self
 
     def __exit__(
@@ -75,7 +76,7 @@ class CpuLatencyRequest:
             self._fd = None
 
     def describe(self) -> str:
-        """One phrase for the simulator's summary."""
-        if self.held:
+        """One phrase for the simulator's summary (during the request or after it)."""
+        if self._granted:
             return f"CPU wake-up latency held at {self.latency_us} us"
         return f"CPU wake-up latency not requested ({self.reason})"

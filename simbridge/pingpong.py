@@ -75,12 +75,11 @@ def main(argv: list[str] | None = None) -> int:
         conn.select(0.05)
         conn.recv()
     with CpuLatencyRequest(0, not_asked="" if args.low_latency_idle else "declined") as request:
-        latency = request.describe()
         t0 = time.perf_counter()
         served = serve(conn, steps, args.steps, timeout_s=10.0)
         wall = time.perf_counter() - t0
     conn.close()
-    print(f"groundfx pingpong: {served} steps in {wall:.2f} s; {latency}", flush=True)
+    print(f"groundfx pingpong: {served} steps in {wall:.2f} s; {request.describe()}", flush=True)
     return 0
 
 

@@ -77,7 +77,7 @@ class SimServer:
         self._listener: socket.socket | None = None
         self.sim_time_s = 0.0
         self.wall_s = 0.0
-        self.idle_latency = ""  # what became of the wake-up latency request, for the summary
+        self._request: CpuLatencyRequest | None = None  # this run's wake-up latency request
 
     def listen(self) -> str:
         """Bind and listen; returns the URL an autopilot connects to (`tcp:HOST:PORT`, the
@@ -106,8 +106,7 @@ class SimServer:
                     self._recv_timeout_s = 0.0
                     self.counters, self._reader = LinkCounters(), FrameReader(mavlink)
                     try:
-                        with self._latency_request() as request:
-                            self.idle_latency = request.describe()
+                        with self._latency_request():
                             self._run(conn, sim)
                     except LinkEnded as end:
                         if not self.options.wait:
@@ -126,14 +125,15 @@ class SimServer:
         """The wake-up latency request for one autopilot's run: asked for only as fast as
         possible (a paced run waits on its clock anyway) and unless declined."""
         o = self.options
-        if o.speedup is not None:
-            return CpuLatencyRequest(0, not_asked="a paced run")
-        return CpuLatencyRequest(0, not_asked="" if o.low_latency_idle else "declined")
+        declined = "" if o.low_latency_idle else "declined"
+        why = "a paced run" if o.speedup is not None else declined
+        self._request = CpuLatencyRequest(0, not_asked=why)
+        return self._request
 
     def summary(self, reason: str) -> str:
         c = self.counters
         rtf = self.sim_time_s / self.wall_s if self.wall_s > 0 else 0.0
-        latency = f"; {self.idle_latency}" if self.idle_latency else ""
+        latency = f"; {self._request.describe()}" if self._request is not None else ""
         return (
             f"{reason}; {c.steps} steps, {self.sim_time_s:.3f} s simulated in {self.wall_s:.2f} s "
             f"wall ({rtf:.1f}x real time); dropped {c.malformed} malformed and {c.unknown} unknown "
