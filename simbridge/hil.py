@@ -30,11 +30,10 @@ from simbridge.frames import (
     local_to_geodetic,
     ned_to_enu,
     quat_enu_flu_to_ned_frd,
-    quat_to_matrix,
     rotate_transposed,
 )
 from simbridge.sensor_noise import SensorErrors
-from simbridge.sim_state import EffectForces, VehicleState
+from simbridge.sim_state import VehicleState
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 from simbridge.wire import PacketSequence, WirePacker
 from simbridge.world import World
@@ -175,10 +174,12 @@ class HilEncoder:
         # the tolerance keeps whole-step periods (50 Hz at 250 Hz: every 5th) exact in floats
         return n == 0 or math.floor(n * rate + 1e-9) > math.floor((n - 1) * rate + 1e-9)
 
-    def encode(self, state: VehicleState, time_us: int, truth: EffectForces | None = None) -> bytes:
+    def encode(
+        self, state: VehicleState, time_us: int, ground_effect_n: Vec3 | None = None
+    ) -> bytes:
         """All messages of one control step at `time_us`, in the order the simulator sends
         them (`tick`, then `truth`)."""
-        return self.tick(state, time_us) + self.truth(time_us, truth)
+        return self.tick(state, time_us) + self.truth(time_us, ground_effect_n)
 
     def tick(self, state: VehicleState, time_us: int) -> bytes:
         """HIL_SENSOR of one control step: the tick a lockstep autopilot answers (its control
@@ -188,14 +189,15 @@ class HilEncoder:
         self._advance(state)
         return self._tick_bytes(time_us)
 
-    def truth(self, time_us: int, forces: EffectForces | None = None) -> bytes:
+    def truth(self, time_us: int, ground_effect_n: Vec3 | None = None) -> bytes:
         """The rest of the step `tick` encoded: its other sensors, then its truth,
         HIL_STATE_QUATERNION last (the end of it).
 
-        `forces`, the simulator's true effect forces, travel as DEBUG_VECT "GE_TRUE" (the
-        world-frame ground-effect force, N): for evaluation and recordings, never control.
+        `ground_effect_n`, the simulator's true world-frame ground-effect force (N), travels
+        as DEBUG_VECT "GE_TRUE" with the true position and clearance: for evaluation and
+        recordings, never control; without it the truth is the state alone.
         """
-        return self._truth_bytes(time_us, forces)
+        return self._truth_bytes(time_us, ground_effect_n)
 
     def _advance(self, state: VehicleState) -> None:
         self._history.append(state)
@@ -205,12 +207,11 @@ class HilEncoder:
         self._mocap_state = hist[max(0, len(hist) - 1 - self._mocap_delay)]
         self._truth_due = self._due("truth")
 
-    def _truth_bytes(self, time_us: int, truth: EffectForces | None) -> bytes:
+    def _truth_bytes(self, time_us: int, ge: Vec3 | None) -> bytes:
         nav = self._nav_state
         parts = [packer.pack(*fields) for packer, fields in self._rest]  # the tick's others
         self._rest.clear()
-        if truth is not None and self._truth_due:
-            ge = truth.ground_effect_n
+        if ge is not None and self._truth_due:
             parts.append(self._pack_debug.pack(TRUTH_NAME, time_us, ge[0], ge[1], ge[2]))
             # the true position and velocity in floats (HIL_STATE_QUATERNION's degE7 resolve
             # 11 mm): for evaluating the autopilot's estimator, never for control
@@ -219,7 +220,7 @@ class HilEncoder:
             parts.append(self._pack_local.pack(time_us // 1000, x, y, z, vx, vy, vz))
             # ... and the true height of the centre of mass above the surface below it
             # (bottom_clearance), by which landings and holds are judged
-            up = quat_to_matrix(nav.quaternion)[8]
+            up = nav.rotation[8]
             clearance = nav.range_m * up if math.isfinite(nav.range_m) else nav.position_m[2]
             parts.append(self._pack_altitude.pack(
                 time_us, nav.position_m[2], nav.position_m[2] + self.world.origin.alt_m,
@@ -253,13 +254,13 @@ class HilEncoder:
         return self.world.origin.alt_m + z_m
 
     def _hil_sensor(self, s: VehicleState, time_us: int) -> bytes:
-        m = quat_to_matrix(s.quaternion)
+        m = s.rotation
         specific_force, rates = _imu_sample(s, m)
         f = self._imu_fraction
         if f > 0.0:  # a fraction of a period further back: towards the older sample
             hist = self._history
             old = hist[max(0, len(hist) - 2 - self._imu_delay)]
-            old_force, old_rates = _imu_sample(old, quat_to_matrix(old.quaternion))
+            old_force, old_rates = _imu_sample(old, old.rotation)
             specific_force = _blend(specific_force, old_force, f)
             rates = _blend(rates, old_rates, f)
         errors = self._errors
@@ -309,7 +310,7 @@ class HilEncoder:
         v = enu_to_ned(s.velocity_m_s)
         rates = flu_to_frd(s.angular_velocity_body_rad_s)
         # xacc..zacc: the true kinematic acceleration in body FRD (as Gazebo reports it), mG.
-        acc = flu_to_frd(rotate_transposed(quat_to_matrix(s.quaternion), s.acceleration_m_s2))
+        acc = flu_to_frd(rotate_transposed(s.rotation, s.acceleration_m_s2))
         to_mg = 1000.0 / GRAVITY_M_S2
         speed_cm_s = min(65535, round(100.0 * math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)))
         return self._pack_hil_state.pack(
@@ -338,7 +339,7 @@ class HilEncoder:
         p = enu_to_ned(errors.vector(self._position(s), errors.noise.mocap_position_m))
         q = quat_enu_flu_to_ned_frd(errors.attitude(s.quaternion))
         if errors.ideal:
-            v_body = flu_to_frd(rotate_transposed(quat_to_matrix(s.quaternion), s.velocity_m_s))
+            v_body = flu_to_frd(rotate_transposed(s.rotation, s.velocity_m_s))
             rates = flu_to_frd(s.angular_velocity_body_rad_s)
         else:
             v_body = rates = (math.nan, math.nan, math.nan)
@@ -395,7 +396,7 @@ class HilEncoder:
         self._distance_step = self._steps
         dt = steps * self.world.control_period_s
         rates = flu_to_frd(s.angular_velocity_body_rad_s)
-        v = flu_to_frd(rotate_transposed(quat_to_matrix(s.quaternion), s.velocity_m_s))
+        v = flu_to_frd(rotate_transposed(s.rotation, s.velocity_m_s))
         h = s.range_m
         known = math.isfinite(h) and h > 0.0
         flow_sd = self._errors.noise.flow_noise_rad

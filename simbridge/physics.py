@@ -32,7 +32,7 @@ from simbridge.vehicle import Vehicle
 from simbridge.world import World
 
 NO_HIT = math.inf
-NO_WALLS = (NO_HIT,) * 4
+NO_HITS = (NO_HIT,) * 4  # four rays that met nothing
 LEARNED_RAY_M = 3.0  # a learnt residual's height rays: beyond, its feature is capped anyway
 
 
@@ -63,6 +63,10 @@ class Simulation:
         self._radius = vehicle.rotor_radius_m
         self._ge = fx.ground_effect
         self._ge_cutoff = self._ge.cutoff_for(self._radius) if self._ge else 0.0
+        # rho, radius, cut-off and reach, as `ground_effect_forces_n` takes them
+        self._ge_args = (
+            (self._ge.rho, self._radius, self._ge_cutoff, self._ge.ray_length_m) if self._ge else ()
+        )
         self._ce = fx.ceiling_effect
         self._wall_effect = fx.wall_effect
         self._ce_cutoff = self._ce.cutoff_for(self._radius) if self._ce else 0.0
@@ -99,6 +103,9 @@ class Simulation:
         # the body's velocities after the last step: only stepping changes them, so they are
         # the next step's start and what `state` reports (None: read them from PyBullet)
         self._velocity_end: tuple[Vec3, Vec3] | None = None
+        # likewise the pose and its rotation matrix: read once after each physics step, they
+        # are the next step's start and what `state` reports
+        self._pose = self._read_pose()
 
     # -- construction -------------------------------------------------------------------
 
@@ -165,17 +172,21 @@ class Simulation:
                 f = rotors.forces(rotors.advance(rotor_commands_rad_s), since)
                 tm = thrust_and_moments(f, self._arm, self._kz)
             self._substep(f, tm)
-        self._velocity_end = pb.getBaseVelocity(body, physicsClientId=cid)
+        self._velocity_end = pb.getBaseVelocity(body, cid)
         v1 = self._velocity_end[0]
         inv = 1.0 / world.control_period_s
         self._acceleration = ((v1[0] - v0[0]) * inv, (v1[1] - v0[1]) * inv, (v1[2] - v0[2]) * inv)
         self._time_us += world.control_period_us
 
+    def _read_pose(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+        """The body's position, quaternion (x, y, z, w) and rotation matrix (row-major)."""
+        pos, orn = pb.getBasePositionAndOrientation(self._body, physicsClientId=self._cid)
+        return pos, orn, pb.getMatrixFromQuaternion(orn)
+
     def _substep(self, f: Quad, tm: tuple[float, float, float, float]) -> None:
         """One physics step with rotor forces `f` and their thrust and moments `tm`."""
         cid, body = self._cid, self._body
-        pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
-        m = pb.getMatrixFromQuaternion(orn)
+        pos, _, m = self._pose
         if self._lift_off_us is None and pos[2] > self.resting_height_m + TAKEOFF_HEIGHT_M:
             self._lift_off_us = self._time_us
         m0, m1, m2, m3, m4, m5, m6, m7, m8 = m
@@ -208,10 +219,7 @@ class Simulation:
         tz = m6 * mx + m7 * my + m8 * mz
 
         if self._ge is not None:  # equation 3.4: vertical, at each rotor hub
-            ge = self._ge
-            g = ground_effect_forces_n(
-                f, heights, ge.rho, self._radius, self._ge_cutoff, ge.ray_length_m
-            )
+            g = ground_effect_forces_n(f, heights, *self._ge_args)
             # the torque of vertical forces g_i at the hubs R r_i: (R s)_y, -(R s)_x with
             # s = sum g_i r_i in the body frame
             sx, sy, sz = self._hub_moment(g)
@@ -241,9 +249,12 @@ class Simulation:
         if self._horizontal_effects:
             self._apply_horizontal(force, m, f, thrust, heights, walls, below)
 
-        pb.applyExternalForce(body, -1, force, pos, pb.WORLD_FRAME, physicsClientId=cid)
-        pb.applyExternalTorque(body, -1, (tx, ty, tz), pb.WORLD_FRAME, physicsClientId=cid)
-        pb.stepSimulation(physicsClientId=cid)
+        # the client id passed by position: keyword parsing costs a tenth of these calls
+        pb.applyExternalForce(body, -1, force, pos, pb.WORLD_FRAME, cid)
+        pb.applyExternalTorque(body, -1, (tx, ty, tz), pb.WORLD_FRAME, cid)
+        pb.stepSimulation(cid)
+        pos, orn = pb.getBasePositionAndOrientation(body, cid)
+        self._pose = (pos, orn, pb.getMatrixFromQuaternion(orn))
 
     def _apply_horizontal(
         self,
@@ -348,23 +359,24 @@ class Simulation:
         """Rotor heights, ceiling distances, wall distances and the centre's height: the
         vertical ones from `VerticalRays` (cast only when they can have changed), the walls'
         horizontal rays every step."""
-        heights = ceilings = [NO_HIT] * 4
+        heights = ceilings = NO_HITS
         below = NO_HIT
         rays = self._vertical_rays
         if rays is not None and self._hub_rays_only:  # the usual case: rotor heights alone
             _, _, _, _, _, _, m6, m7, m8 = m
             pz = pos[2]
             x0, y0, z0, x1, y1, z1, x2, y2, z2, x3, y3, z3 = self._rotors_flat
-            zs = (  # the hubs' heights, written out (1 kHz)
-                pz + m6 * x0 + m7 * y0 + m8 * z0,
-                pz + m6 * x1 + m7 * y1 + m8 * z1,
-                pz + m6 * x2 + m7 * y2 + m8 * z2,
-                pz + m6 * x3 + m7 * y3 + m8 * z3,
-            )
-            known = rays.distances_about(pos, zs)
-            heights = (
-                known if known is not None else rays.distances(self._hubs(pos, m), pos, self._span)
-            )
+            heights = rays.distances_about(  # the hubs' heights, written out (1 kHz)
+                pos,
+                (
+                    pz + m6 * x0 + m7 * y0 + m8 * z0,
+                    pz + m6 * x1 + m7 * y1 + m8 * z1,
+                    pz + m6 * x2 + m7 * y2 + m8 * z2,
+                    pz + m6 * x3 + m7 * y3 + m8 * z3,
+                ),
+            ) or rays.distances(self._hubs(pos, m), pos, self._span)
+            if self._wall_effect is None:
+                return heights, ceilings, NO_HITS, below
         elif rays is not None:
             px, py, pz = pos
             hubs = self._hubs(pos, m)
@@ -383,7 +395,7 @@ class Simulation:
                 ceilings, i = d[i : i + 4], i + 4
             if self._outwash is not None:
                 below = d[i]
-        walls: tuple[float, ...] = NO_WALLS
+        walls: tuple[float, ...] = NO_HITS
         wall = self._wall_effect
         if wall is not None:
             px, py, pz = pos
@@ -404,11 +416,11 @@ class Simulation:
     # -- reading ------------------------------------------------------------------------
 
     def state(self) -> VehicleState:
-        cid, body = self._cid, self._body
-        pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
+        pos, orn, m = self._pose
         end = self._velocity_end
-        vel, omega = end if end is not None else pb.getBaseVelocity(body, physicsClientId=cid)
-        m = pb.getMatrixFromQuaternion(orn)
+        if end is None:
+            end = pb.getBaseVelocity(self._body, physicsClientId=self._cid)
+        vel, omega = end
         omega_body = (
             m[0] * omega[0] + m[3] * omega[1] + m[6] * omega[2],
             m[1] * omega[0] + m[4] * omega[1] + m[7] * omega[2],
@@ -431,6 +443,13 @@ class Simulation:
         end = (pos[0] - m[2] * reach, pos[1] - m[5] * reach, pos[2] - m[8] * reach)
         hit = pb.rayTest(pos, end, collisionFilterMask=WORLD_GROUP, physicsClientId=self._cid)[0]
         return hit[2] * reach if hit[0] >= 0 else NO_HIT
+
+    @property
+    def ground_effect_n(self) -> Vec3:
+        """The true world-frame ground-effect force of the last physics step (what the HIL
+        link sends as truth each step: `effect_forces` has them all)."""
+        f = self._ge_force
+        return (f[0], f[1], f[2])
 
     def effect_forces(self) -> EffectForces:
         return EffectForces(

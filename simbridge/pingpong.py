@@ -41,7 +41,7 @@ def sample_steps(world_name: str, altitude_m: float) -> list[list[Any]]:
     with Simulation(world, vehicle) as sim:
         for _ in range(SAMPLE_STEPS):
             sim.step((n, n, n, n))
-            data = encoder.encode(sim.state(), sim.time_us, sim.effect_forces())
+            data = encoder.encode(sim.state(), sim.time_us, sim.ground_effect_n)
             steps.append(list(parser.parse_buffer(data) or ()))
     return steps
 

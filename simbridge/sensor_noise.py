@@ -117,6 +117,9 @@ class SensorErrors:
         self._accel_walk = noise.accel_bias_walk * math.sqrt(period_s)
         self._gyro_walk = noise.gyro_bias_walk * math.sqrt(period_s)
         self.ideal = noise.is_ideal
+        # every IMU error on (the default): a sample's 12 normals are taken in one slice
+        self._imu_sds = (self._accel_walk, self._gyro_walk, self._accel_sd, self._gyro_sd)
+        self._imu_all = min(self._imu_sds) > 0.0
 
     def _normal(self) -> float:
         i = self._next
@@ -125,6 +128,15 @@ class SensorErrors:
             i = 0
         self._next = i + 1
         return self._normals[i]
+
+    def _take(self, count: int) -> list[float]:
+        """The next `count` normals, the same as `count` calls of `_normal`."""
+        i = self._next
+        j = i + count
+        if j <= len(self._normals):
+            self._next = j
+            return self._normals[i:j]
+        return [self._normal() for _ in range(count)]
 
     def _vector3(self, sd: float) -> Vec3:
         if sd <= 0.0:
@@ -136,12 +148,22 @@ class SensorErrors:
         if self.ideal:
             return specific_force_flu, rates_flu
         ab, gb = self.accel_bias, self.gyro_bias
+        a, w = specific_force_flu, rates_flu
+        if self._imu_all:  # the same arithmetic as below, in the same order
+            z0, z1, z2, z3, z4, z5, z6, z7, z8, z9, z10, z11 = self._take(12)
+            aw_sd, gw_sd, a_sd, g_sd = self._imu_sds
+            ab = (ab[0] + aw_sd * z0, ab[1] + aw_sd * z1, ab[2] + aw_sd * z2)
+            gb = (gb[0] + gw_sd * z3, gb[1] + gw_sd * z4, gb[2] + gw_sd * z5)
+            self.accel_bias, self.gyro_bias = ab, gb
+            return (
+                (a[0] + ab[0] + a_sd * z6, a[1] + ab[1] + a_sd * z7, a[2] + ab[2] + a_sd * z8),
+                (w[0] + gb[0] + g_sd * z9, w[1] + gb[1] + g_sd * z10, w[2] + gb[2] + g_sd * z11),
+            )
         aw, gw = self._vector3(self._accel_walk), self._vector3(self._gyro_walk)
         ab = (ab[0] + aw[0], ab[1] + aw[1], ab[2] + aw[2])
         gb = (gb[0] + gw[0], gb[1] + gw[1], gb[2] + gw[2])
         self.accel_bias, self.gyro_bias = ab, gb
         an, gn = self._vector3(self._accel_sd), self._vector3(self._gyro_sd)
-        a, w = specific_force_flu, rates_flu
         return (
             (a[0] + ab[0] + an[0], a[1] + ab[1] + an[1], a[2] + ab[2] + an[2]),
             (w[0] + gb[0] + gn[0], w[1] + gb[1] + gn[1], w[2] + gb[2] + gn[2]),

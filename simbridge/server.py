@@ -43,6 +43,11 @@ class ServerOptions:
     low_latency_idle: bool = True
 
 
+# HIL_ACTUATOR_CONTROLS's payload in wire order (pymavlink's layout; tests check it):
+# time_usec, flags, controls[16], mode
+ACTUATORS = mavlink.MAVLink_hil_actuator_controls_message
+
+
 @dataclass
 class LinkCounters:
     steps: int = 0
@@ -181,7 +186,7 @@ class SimServer:
         sensors and its truth, encoded while the autopilot computes its reply (an autopilot
         answers HIL_SENSOR and takes the rest as it comes; ours reads it after its reply)."""
         self._send(conn, encoder.tick(sim.state(), sim.time_us))
-        forces = sim.effect_forces() if with_forces else None
+        forces = sim.ground_effect_n if with_forces else None
         self._send(conn, encoder.truth(sim.time_us, forces))
 
     def _send(self, conn: socket.socket, data: bytes) -> None:
@@ -234,23 +239,26 @@ class SimServer:
 
     def _parse(self, data: bytes, not_before_us: int) -> ActuatorCommand | None:
         c, reader = self.counters, self._reader
+        values = reader.lone(data, ACTUATORS.id)
+        if values is not None:  # the usual reply: one whole frame, its values in wire order
+            replies = [(values[0], values[2:18], values[18], values[1])]
+        else:
+            replies = []
+            for kind, fields in reader.feed(data):
+                if kind != "HIL_ACTUATOR_CONTROLS":
+                    c.ignored += 1
+                    continue
+                replies.append(
+                    (fields["time_usec"], fields["controls"], fields["mode"], fields["flags"])
+                )
+            c.malformed, c.unknown = reader.malformed, reader.unknown
         latest = None
-        for kind, fields in reader.feed(data):
-            if kind != "HIL_ACTUATOR_CONTROLS":
-                c.ignored += 1
-                continue
-            command = decode_actuators(
-                fields["time_usec"],
-                fields["controls"],
-                fields["mode"],
-                fields["flags"],
-                self.vehicle,
-            )
+        for time_us, controls, mode, flags in replies:
+            command = decode_actuators(time_us, controls, mode, flags, self.vehicle)
             c.actuator_messages += 1
             c.clamped += command.clamped
             if command.time_us < not_before_us:
                 c.stale += 1
             else:
                 latest = command
-        c.malformed, c.unknown = reader.malformed, reader.unknown
         return latest

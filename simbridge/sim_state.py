@@ -4,8 +4,9 @@ of the world's effects (`simbridge.physics` fills them; the HIL encoder sends th
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
-from simbridge.frames import Quat, Vec3
+from simbridge.frames import Mat3, Quat, Vec3, quat_to_matrix
 from simbridge.rotors import Quad
 
 
@@ -21,6 +22,12 @@ class VehicleState:
     acceleration_m_s2: Vec3  # world frame, mean over the last control period
     rotor_speeds_rad_s: Quad  # actual (after motor lag)
     range_m: float  # downward range sensor: distance along body -z to a surface, inf if none
+
+    @cached_property
+    def rotation(self) -> Mat3:
+        """The quaternion as a rotation matrix (row-major, body to world), computed once: the
+        HIL encoder turns several of a step's vectors by it."""
+        return quat_to_matrix(self.quaternion)
 
 
 @dataclass(frozen=True)

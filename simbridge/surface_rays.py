@@ -93,8 +93,26 @@ class VerticalRays:
         dx, dy = centre[0] - c0[0], centre[1] - c0[1]
         if dx * dx + dy * dy >= self._centre_safe2:
             return None
-        if len(heights_m) == 4:
-            return self._four_about(heights_m)
+        if len(heights_m) == 4:  # a quadrotor's hubs, written out: asked at 1 kHz
+            z0, z1, z2, z3 = heights_m
+            c0, c1, c2, c3 = self._cast_z
+            if (
+                abs(z0 - c0) >= SLACK_M
+                or abs(z1 - c1) >= SLACK_M
+                or abs(z2 - c2) >= SLACK_M
+                or abs(z3 - c3) >= SLACK_M
+            ):
+                return None
+            l0, l1, l2, l3 = self._levels
+            s0, s1, s2, s3 = self._signs
+            r0, r1, r2, r3 = self._reach
+            h0, h1, h2, h3 = s0 * (l0 - z0), s1 * (l1 - z1), s2 * (l2 - z2), s3 * (l3 - z3)
+            return [
+                NO_HIT if h0 > r0 else (h0 if h0 > 0.0 else 0.0),
+                NO_HIT if h1 > r1 else (h1 if h1 > 0.0 else 0.0),
+                NO_HIT if h2 > r2 else (h2 if h2 > 0.0 else 0.0),
+                NO_HIT if h3 > r3 else (h3 if h3 > 0.0 else 0.0),
+            ]
         out = []
         for z, z0, level, sign, reach in zip(  # noqa: B905 (lengths equal)
             heights_m, self._cast_z, self._levels, self._signs, self._reach
@@ -104,29 +122,6 @@ class VerticalRays:
             h = sign * (level - z)
             out.append(NO_HIT if h > reach else (h if h > 0.0 else 0.0))
         return out
-
-    def _four_about(self, heights_m: Sequence[float]) -> list[float] | None:
-        """`distances_about` for four points (a quadrotor's hubs), written out: the physics
-        step asks at 1 kHz, and the loop's bookkeeping cost more than its arithmetic."""
-        z0, z1, z2, z3 = heights_m
-        c0, c1, c2, c3 = self._cast_z
-        if (
-            abs(z0 - c0) >= SLACK_M
-            or abs(z1 - c1) >= SLACK_M
-            or abs(z2 - c2) >= SLACK_M
-            or abs(z3 - c3) >= SLACK_M
-        ):
-            return None
-        l0, l1, l2, l3 = self._levels
-        s0, s1, s2, s3 = self._signs
-        r0, r1, r2, r3 = self._reach
-        h0, h1, h2, h3 = s0 * (l0 - z0), s1 * (l1 - z1), s2 * (l2 - z2), s3 * (l3 - z3)
-        return [
-            NO_HIT if h0 > r0 else (h0 if h0 > 0.0 else 0.0),
-            NO_HIT if h1 > r1 else (h1 if h1 > 0.0 else 0.0),
-            NO_HIT if h2 > r2 else (h2 if h2 > 0.0 else 0.0),
-            NO_HIT if h3 > r3 else (h3 if h3 > 0.0 else 0.0),
-        ]
 
     def distances(
         self, points: Sequence[Point], centre: Point | None = None, span_m: float = 0.0

@@ -94,7 +94,8 @@ class WireUnpacker:
 
     def __init__(self, message_class: Any) -> None:
         self._struct = message_class.unpacker
-        self._size = message_class.unpacker.size
+        self._size = self.size = message_class.unpacker.size
+        self.unpack = message_class.unpacker.unpack  # a whole payload's values, in wire order
         self._layout = _array_layout(message_class)
         types = dict(zip(message_class.fieldnames, message_class.fieldtypes, strict=True))
         self._text = tuple(name for name, kind in types.items() if kind == "char")
@@ -188,6 +189,28 @@ class FrameReader:
             self.malformed += 1
             return None
         return name, fields, end + (SIGNATURE_LEN if flags & SIGNED_FLAG else 0)
+
+    def lone(self, data: bytes, msgid: int) -> tuple[Any, ...] | None:
+        """The payload's values in wire order when nothing is pending and `data` is exactly
+        one whole, unsigned, valid frame of message `msgid` at its full length (a lockstep
+        reply, the usual case: about a microsecond instead of `feed`'s three); otherwise None
+        with nothing read or counted, for `feed` to take."""
+        n = len(data)
+        if (
+            self._pending
+            or n < 12
+            or data[0] != MAVLINK2_STX
+            or data[2]
+            or data[7] | data[8] << 8 | data[9] << 16 != msgid
+            or n != 12 + data[1]
+        ):
+            return None
+        known = self._known(msgid)
+        if known is None or data[1] != known[2].size:
+            return None
+        if _crc(data[1 : n - 2] + known[1]) != data[n - 2] | data[n - 1] << 8:
+            return None
+        return known[2].unpack(data[10 : n - 2])
 
     def _next_valid(self, buf: bytes, i: int) -> int | None:
         while (j := buf.find(MAVLINK2_STX, i)) >= 0:

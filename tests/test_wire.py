@@ -170,3 +170,30 @@ def test_reader_resynchronises_after_noise_bad_crcs_and_broken_headers():
     assert [name for name, _ in decoded] == ["HIL_SENSOR"]
     assert decoded[0][1]["time_usec"] == values[0]
     assert reader.malformed >= 3 and reader.unknown >= 1  # rescanning may count a stray 0xFD too
+
+
+def test_a_lone_reply_frame_reads_as_feed_decodes_it_and_anything_else_is_left_to_feed():
+    """The simulator reads a lockstep reply (one whole HIL_ACTUATOR_CONTROLS) by `lone`, and
+    whatever else arrives by `feed`: the same values either way, nothing counted twice."""
+    from simbridge.server import ACTUATORS
+
+    mav = mavlink.MAVLink(None, 1, 1)
+    controls = [0.5, 0.25, 0.125, 1.0] + [0.0] * 12
+    armed = ACTUATORS(123456, controls, mavlink.MAV_MODE_FLAG_SAFETY_ARMED, 1).pack(mav)
+    values = FrameReader(mavlink).lone(armed, ACTUATORS.id)
+    [(name, fields)] = FrameReader(mavlink).feed(armed)
+    assert values is not None and name == "HIL_ACTUATOR_CONTROLS"
+    # the server's reading of the wire order
+    assert (values[0], list(values[2:18]), values[18], values[1]) == (
+        fields["time_usec"], list(fields["controls"]), fields["mode"], fields["flags"]
+    )  # fmt: skip
+    disarmed = ACTUATORS(123456, controls, 0, 1).pack(mav)  # mode 0: its last byte dropped
+    corrupted = bytearray(armed)
+    corrupted[30] ^= 0xFF
+    reader = FrameReader(mavlink)
+    for data in (disarmed, bytes(corrupted), armed + armed, armed[:-1], b"noise" + armed):
+        assert reader.lone(data, ACTUATORS.id) is None
+    assert reader.lone(armed, mavlink.MAVLink_hil_sensor_message.id) is None
+    assert reader.malformed == reader.unknown == 0
+    reader.feed(armed[:-1])  # a frame cut short waits: the next bytes are not a lone frame
+    assert reader.pending and reader.lone(armed, ACTUATORS.id) is None
