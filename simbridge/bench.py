@@ -8,7 +8,10 @@ ratio holds where the absolute figure does not).
   moment, step), as gym-pybullet-drones' `_physics` does;
 - lockstep: `groundfx sim` in its own process against a minimal pymavlink client, against
   `simbridge.pingpong` (the same messages packed and parsed by pymavlink, no physics) with
-  the same client.
+  the same client. The lockstep runs over both of the simulator's transports: the
+  Unix-domain socket our flights use (`groundfx fly`, the campaigns: both ends ours) and
+  TCP, as any PX4-protocol autopilot connects; the ping-pong over TCP, as pymavlink's
+  `mavutil` connects (it has no Unix-domain sockets).
 """
 
 from __future__ import annotations
@@ -17,12 +20,15 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 from typing import Any
 
+from simbridge import transport
 from simbridge.client import connect, constant, hover_fraction, run_lockstep
 from simbridge.effects.ground import hover_rotor_speed_in_ground_effect_rad_s
-from simbridge.launch import SimProcessError, finish, start_sim
+from simbridge.launch import SimProcessError, finish, spawn_local_sim, start_sim
 from simbridge.physics import Simulation
 from simbridge.pingpong import LISTENING
 from simbridge.pybullet_quiet import pybullet as pb
@@ -85,8 +91,7 @@ def bare_loop_rtf(world: World, vehicle: Vehicle, seconds: float) -> dict[str, f
     return {"bare_loop_rtf": seconds / wall, "bare_loop_us_per_step": wall / steps * 1e6}
 
 
-def _lockstep(port: int, steps: int, command: Any) -> float:
-    sock = connect("127.0.0.1", port)
+def _lockstep(sock: Any, steps: int, command: Any) -> float:
     try:
         t0 = time.perf_counter()
         run_lockstep(sock, steps, command)
@@ -96,20 +101,38 @@ def _lockstep(port: int, steps: int, command: Any) -> float:
 
 
 def lockstep_rtf(
-    world_name: str, vehicle: Vehicle, control_period_s: float, seconds: float
+    world_name: str, vehicle: Vehicle, control_period_s: float, seconds: float, kind: str
 ) -> dict[str, Any]:
-    """`groundfx sim` in its own process against a minimal pymavlink client, constant actuators."""
-    proc, port = start_sim(world_name, speedup="max", start=f"0,0,{BENCH_ALTITUDE_M}")
+    """`groundfx sim` in its own process against a minimal pymavlink client, constant
+    actuators, over a Unix-domain socket (`kind` "unix": keys `lockstep_*`) or TCP ("tcp":
+    `lockstep_tcp_*`)."""
     steps = max(1, round(seconds / control_period_s))
     command = constant(
         hover_fraction(vehicle.hover_rotor_speed_rad_s, vehicle.max_rotor_speed_rad_s)
     )
-    wall = _lockstep(port, steps, command)
-    last_line = finish(proc)
+    start = f"0,0,{BENCH_ALTITUDE_M}"
+    if kind == transport.UNIX:
+        with tempfile.TemporaryDirectory(prefix="groundfx-bench-") as folder:
+            path = Path(folder) / "sim.sock"
+            proc = spawn_local_sim(world_name, path, start=start)
+            try:
+                sock = transport.connect(f"unix:{path}", timeout_s=30.0)
+            except ConnectionError:
+                proc.kill()
+                _, err = proc.communicate(timeout=10)
+                raise SimProcessError(f"groundfx sim did not start: {err.strip()}") from None
+            wall = _lockstep(sock, steps, command)
+            last_line = finish(proc)
+        prefix = "lockstep"
+    else:
+        proc, port = start_sim(world_name, speedup="max", start=start)
+        wall = _lockstep(connect("127.0.0.1", port), steps, command)
+        last_line = finish(proc)
+        prefix = "lockstep_tcp"
     return {
-        "lockstep_rtf": steps * control_period_s / wall,
-        "lockstep_us_per_step": wall / steps * 1e6,
-        "sim_report": last_line,
+        f"{prefix}_rtf": steps * control_period_s / wall,
+        f"{prefix}_us_per_step": wall / steps * 1e6,
+        f"{prefix.replace('lockstep', 'sim')}_report": last_line,
     }
 
 
@@ -129,7 +152,7 @@ def pingpong_rtf(
     command = constant(
         hover_fraction(vehicle.hover_rotor_speed_rad_s, vehicle.max_rotor_speed_rad_s)
     )
-    wall = _lockstep(int(line.rsplit(":", 1)[1]), steps, command)
+    wall = _lockstep(connect("127.0.0.1", int(line.rsplit(":", 1)[1])), steps, command)
     report = finish(proc)
     return {
         "pingpong_rtf": steps * control_period_s / wall,
@@ -158,8 +181,9 @@ def bench_sim(
         for figure in (
             physics_rtf(world, vehicle, seconds),
             bare_loop_rtf(world, vehicle, seconds),
-            lockstep_rtf(path, vehicle, world.control_period_s, seconds),
+            lockstep_rtf(path, vehicle, world.control_period_s, seconds, transport.UNIX),
             pingpong_rtf(path, vehicle, world.control_period_s, seconds),
+            lockstep_rtf(path, vehicle, world.control_period_s, seconds, transport.TCP),
         ):
             last.update(figure)
             for key, value in figure.items():
@@ -174,13 +198,17 @@ def bench_sim(
         "repeat": repeat,
         **{key: statistics.median(values) for key, values in runs.items()},
         "sim_report": last["sim_report"],
+        "sim_tcp_report": last["sim_tcp_report"],
         "pingpong_report": last["pingpong_report"],
         # both lockstep loops ran with the same CPU wake-up latency (simbridge/cpu_latency.py)
         "cpu_wake_latency": wake_latency(last["sim_report"]),
         "physics_runs": runs["physics_rtf"],
         "lockstep_runs": runs["lockstep_rtf"],
+        "lockstep_tcp_runs": runs["lockstep_tcp_rtf"],
+        "pingpong_runs": runs["pingpong_rtf"],
     }
     result["physics_ratio"] = result["physics_rtf"] / result["bare_loop_rtf"]
     result["lockstep_ratio"] = result["lockstep_rtf"] / result["pingpong_rtf"]
+    result["lockstep_tcp_ratio"] = result["lockstep_tcp_rtf"] / result["pingpong_rtf"]
     result["load_average"] = (load_before, os.getloadavg()[0])
     return result

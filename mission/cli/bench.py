@@ -93,10 +93,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
             f"{r['physics_ratio']:.2f} of it"
         )
         print(
-            f"lockstep: {r['lockstep_rtf']:.1f}x real time "
-            f"({r['lockstep_us_per_step']:.0f} us per {r['control_hz']} Hz round trip); "
-            f"pymavlink ping-pong {r['pingpong_rtf']:.1f}x "
-            f"({r['pingpong_us_per_step']:.0f} us): {r['lockstep_ratio']:.2f} of it"
+            f"lockstep: {r['lockstep_rtf']:.1f}x real time over a Unix-domain socket "
+            f"({r['lockstep_us_per_step']:.0f} us per {r['control_hz']} Hz round trip), "
+            f"{r['lockstep_tcp_rtf']:.1f}x over TCP ({r['lockstep_tcp_us_per_step']:.0f} us); "
+            f"pymavlink ping-pong over TCP {r['pingpong_rtf']:.1f}x "
+            f"({r['pingpong_us_per_step']:.0f} us): {r['lockstep_ratio']:.2f} and "
+            f"{r['lockstep_tcp_ratio']:.2f} of it"
         )
         print(f"both lockstep loops: {r['cpu_wake_latency'] or 'CPU wake-up latency unknown'}")
         print(
