@@ -177,3 +177,8 @@ def test_prediction_plot_and_inference_benchmark(tmp_path):
     assert bench.returncode == 0, bench.stderr
     figures = json.loads(bench.stdout.strip().splitlines()[-1])
     assert 0 < figures["predict_us_p50"] <= figures["predict_us_p99"]
+    # beside its reference, measured in the same run: the same network as torch runs it,
+    # giving the same forces
+    assert 0 < figures["torch_us_p50"] <= figures["torch_us_p99"]
+    assert figures["speedup_over_torch"] == figures["torch_us_p50"] / figures["predict_us_p50"]
+    assert figures["max_force_difference_n"] < 1e-9 and len(figures["load_average"]) == 2

@@ -50,9 +50,20 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.target == "model":
         from learner.bench import bench_model
 
-        result = bench_model(args.network)
+        r = bench_model(args.network)
+        if args.json:
+            print(json.dumps(r))
+            return 0
         print(
-            json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
+            f"network {r['network']}: {r['predict_us_p50']:.1f} us p50 per sample "
+            f"({r['predict_us_p99']:.1f} p99); the same network in torch "
+            f"{r['torch_us_p50']:.1f} us ({r['torch_us_p99']:.1f}): "
+            f"{r['speedup_over_torch']:.1f} times as fast"
+        )
+        print(
+            f"the two agree to {r['max_force_difference_n']:.1e} N; {r['samples']} samples each, "
+            f"interleaved; load average {r['load_average'][0]:.2f} before, "
+            f"{r['load_average'][1]:.2f} after"
         )
         return 0
     if args.target == "online":
