@@ -103,6 +103,12 @@ class WireUnpacker:
         self._names = (
             None if any(count for _, count in self._layout) else [n for n, _ in self._layout]
         )
+        # with arrays, each field's index into the values or its slice of them
+        self._index: list[tuple[str, int | slice]] = []
+        i = 0
+        for name, count in self._layout:
+            self._index.append((name, slice(i, i + count) if count else i))
+            i += count or 1
 
     def decode_payload(self, payload: bytes) -> dict[str, Any] | None:
         """The fields of one payload (MAVLink 2 may have dropped its trailing zeros)."""
@@ -113,19 +119,9 @@ class WireUnpacker:
             return None
         values = self._struct.unpack(payload)
         if self._names is not None:
-            fields = dict(zip(self._names, values, strict=True))
-            for name in self._text:
-                fields[name] = fields[name].split(b"\0", 1)[0].decode("utf-8", "replace")
-            return fields
-        fields = {}
-        i = 0
-        for name, count in self._layout:
-            if count:
-                fields[name] = values[i : i + count]
-                i += count
-            else:
-                fields[name] = values[i]
-                i += 1
+            fields = dict(zip(self._names, values))  # noqa: B905 (lengths equal by construction)
+        else:
+            fields = {name: values[at] for name, at in self._index}
         for name in self._text:  # as pymavlink: text up to the first NUL
             fields[name] = fields[name].split(b"\0", 1)[0].decode("utf-8", "replace")
         return fields
@@ -173,7 +169,7 @@ class FrameReader:
         if flags & ~SIGNED_FLAG:
             return None
         msgid = buf[i + 7] | buf[i + 8] << 8 | buf[i + 9] << 16
-        known = self._known(msgid)
+        known = self._unpackers.get(msgid) or self._known(msgid)
         if known is None:
             self.unknown += 1
             return None
