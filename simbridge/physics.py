@@ -180,7 +180,7 @@ class Simulation:
 
     def _read_pose(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
         """The body's position, quaternion (x, y, z, w) and rotation matrix (row-major)."""
-        pos, orn = pb.getBasePositionAndOrientation(self._body, physicsClientId=self._cid)
+        pos, orn = pb.getBasePositionAndOrientation(self._body, self._cid)
         return pos, orn, pb.getMatrixFromQuaternion(orn)
 
     def _substep(self, f: Quad, tm: tuple[float, float, float, float]) -> None:
@@ -253,8 +253,7 @@ class Simulation:
         pb.applyExternalForce(body, -1, force, pos, pb.WORLD_FRAME, cid)
         pb.applyExternalTorque(body, -1, (tx, ty, tz), pb.WORLD_FRAME, cid)
         pb.stepSimulation(cid)
-        pos, orn = pb.getBasePositionAndOrientation(body, cid)
-        self._pose = (pos, orn, pb.getMatrixFromQuaternion(orn))
+        self._pose = self._read_pose()
 
     def _apply_horizontal(
         self,
