@@ -168,6 +168,7 @@ def diagnose(
         [(r - p)[:: gapfit.STRIDE] for r, p in zip(problem.residuals, after, strict=True)]
     )
     best, trail = forward_search(problem, tried, folds)
+    best = gapfit.final_fit(problem, best)  # the reported values and intervals: every row
     effects = effect_report(problem, best, excitation, excited, trail, tried, candidates)
     all_data = fit_data + hold_data
     all_res = problem.residuals + hold_res

@@ -170,7 +170,8 @@ def _alternatives_ruled_out(
                 out[other] = why
                 continue
         names = tuple(other if n == name else n for n in best.names)
-        alt = gapfit.fit(problem, names, max_nfev=60, start=best.values)
+        # on the rows `best` was fitted on: its criterion is compared with this one's
+        alt = gapfit.fit(problem, names, max_nfev=60, start=best.values, every_row=best.every_row)
         bad = implausible_parameters(other, alt.values[other], cat)
         if bad:
             h = bad[0]
@@ -209,7 +210,9 @@ def _bias_or_tilt(problem: gapfit.Problem, best: gapfit.Fit, name: str, other: s
 def _trades_off(problem: gapfit.Problem, best: gapfit.Fit, name: str, other: str) -> float:
     """The largest correlation between a parameter of `name` and one of `other` when both are
     fitted beside the chosen set."""
-    f = gapfit.fit(problem, (*best.names, other), max_nfev=60, start=best.values)
+    f = gapfit.fit(
+        problem, (*best.names, other), max_nfev=60, start=best.values, every_row=best.every_row
+    )
     sd = np.sqrt(np.maximum(np.diag(f.cov), 1e-300))
     corr = f.cov / np.outer(sd, sd)
     index, i = {}, 0
@@ -314,7 +317,10 @@ def per_flight_values(
     if not best.names:
         return
     problems = [(d.name, gapfit.problem_for([d], nominal, vehicle)) for d in flights]
-    fits = [(n, gapfit.fit(p, best.names, max_nfev=60, start=best.values)) for n, p in problems]
+    fits = [
+        (n, gapfit.fit(p, best.names, max_nfev=60, start=best.values, every_row=best.every_row))
+        for n, p in problems
+    ]
     cat = problems[0][1].catalogue
     for name in best.names:
         for effect in CANDIDATES[name].effects:
