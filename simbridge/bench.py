@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from simbridge import transport
-from simbridge.client import connect, constant, hover_fraction, run_lockstep
+from simbridge.client import connect, constant, end_lockstep, hover_fraction, run_lockstep
 from simbridge.effects.ground import hover_rotor_speed_in_ground_effect_rad_s
 from simbridge.launch import SimProcessError, finish, spawn_local_sim, start_sim
 from simbridge.physics import Simulation
@@ -95,7 +95,9 @@ def _lockstep(sock: Any, steps: int, command: Any) -> float:
     try:
         t0 = time.perf_counter()
         run_lockstep(sock, steps, command)
-        return time.perf_counter() - t0
+        wall = time.perf_counter() - t0
+        end_lockstep(sock)
+        return wall
     finally:
         sock.close()
 

@@ -70,6 +70,20 @@ def run_lockstep(
     return view
 
 
+def end_lockstep(sock: socket.socket, timeout_s: float = 10.0) -> None:
+    """Tell the simulator this client is done (its write side shut) and read until the
+    simulator closes: it then takes every reply before it ends. Closed at once, the socket
+    could refuse the simulator's send of the last step's truth first (a Unix-domain socket
+    does so at once), and the simulator would end a step short of the replies."""
+    try:
+        sock.shutdown(socket.SHUT_WR)
+        sock.settimeout(timeout_s)
+        while sock.recv(65536):
+            pass
+    except OSError:
+        pass  # gone already, or silent past the timeout: the caller closes it either way
+
+
 def constant(value: float) -> Policy:
     """The same normalised command on every rotor."""
     return lambda _t, _v: (value, value, value, value)
