@@ -368,8 +368,9 @@ def test_a_member_a_later_one_made_redundant_leaves_the_set(tmp_path: Path) -> N
     motor lag fell to 0.2 us once the lag (and a coasting rotor) joined, and stayed 'present'
     (a blind case's crashed flights). A member below the size the rule admits leaves when
     the set fits as well without it; one of its size stays."""
-    from learner.gap.fit import MIN_SIZE, effect_size, fit, problem_for
+    from learner.gap.fit import fit, problem_for
     from learner.gap.search import _prune
+    from learner.gap.selection import MIN_SIZE, effect_size
 
     world = world_file(tmp_path / "world.yaml")
     w = load_world(world)

@@ -162,7 +162,7 @@ def test_block_robust_wald_test_keeps_its_level_under_correlated_misfit_and_find
     and still finds a slope of 0.15 in a misfit of standard deviation 0.25."""
     from scipy.signal import lfilter
 
-    from learner.gap.fit import selected
+    from learner.gap.selection import selected
 
     rng = np.random.default_rng(5)
     t = np.arange(0.0, 60.0, 0.01)
@@ -182,7 +182,7 @@ def test_block_robust_wald_test_keeps_its_level_under_correlated_misfit_and_find
 
 
 def test_selection_rule_needs_criterion_significance_and_held_out_gain() -> None:
-    from learner.gap.fit import ALPHA, selected
+    from learner.gap.selection import ALPHA, selected
 
     assert selected(5.0, 0.2 * ALPHA, tried=3, cv_gain=0.001)
     assert not selected(5.0, 0.5 * ALPHA, tried=3, cv_gain=0.001)  # Bonferroni over 3 tried
@@ -193,7 +193,7 @@ def test_selection_rule_needs_criterion_significance_and_held_out_gain() -> None
 def test_selection_rule_ignores_significant_but_tiny_effects() -> None:
     """A 1 ms IMU delay (an eighth of the catalogue's 8 ms) riding on a large effect's misfit is
     not reported however significant; a ground effect raised from the nominal rho 1 to 1.6 is."""
-    from learner.gap.fit import MIN_SIZE, effect_size, selected
+    from learner.gap.selection import MIN_SIZE, effect_size, selected
 
     tiny = effect_size("sensor_latency", np.array([0.001]), {})
     assert tiny < MIN_SIZE
@@ -204,7 +204,7 @@ def test_selection_rule_ignores_significant_but_tiny_effects() -> None:
 
 
 def test_selection_rule_rejects_a_fit_on_its_bounds() -> None:
-    from learner.gap.fit import at_bound, selected
+    from learner.gap.selection import at_bound, selected
 
     assert at_bound("thrust_mass", np.array([-0.5]))
     assert not at_bound("thrust_mass", np.array([0.04]))

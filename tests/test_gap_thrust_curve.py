@@ -13,6 +13,7 @@ import pytest
 
 from learner.flightlogs.flightlog import FlightLog
 from learner.gap import fit as gapfit
+from learner.gap import selection
 from learner.gap.candidates import (
     CANDIDATES,
     nominal_values,
@@ -87,10 +88,10 @@ def test_the_candidate_is_physical_from_half_to_twice_and_written_as_the_simulat
     c = CANDIDATES["thrust_curve"]
     assert c.null == (1.0,) and c.plausible_lo == (0.5,) and c.plausible_hi == (2.0,)
     assert c.lo[0] < 0.5 and c.hi[0] > 2.0 and not c.needs_accelerometer
-    assert gapfit.null_values("thrust_curve", {}) == pytest.approx([1.0])
-    assert gapfit.effect_size("thrust_curve", np.array([1.3]), {}) == pytest.approx(3.0)
+    assert selection.null_values("thrust_curve", {}) == pytest.approx([1.0])
+    assert selection.effect_size("thrust_curve", np.array([1.3]), {}) == pytest.approx(3.0)
     # its low bound is a bound (below the null), as a wind's is
-    assert gapfit.bound_hits("thrust_curve", np.array([c.lo[0]]))[0]["side"] == "low"
+    assert selection.bound_hits("thrust_curve", np.array([c.lo[0]]))[0]["side"] == "low"
     effects = to_world_effects({"thrust_curve": np.array([1.3])})
     assert effects == [{"name": "thrust_curve", "gamma": 1.3}]
     fx = parse_effects(effects, "w")

@@ -17,18 +17,12 @@ from scipy.optimize import least_squares
 from learner.gap.candidates import CANDIDATES, Candidate, Values, catalogue, world_force
 from learner.gap.flightdata import FlightData, every_nth
 from learner.gap.residual import residual_n, smooth_per_segment
-from learner.gap.stats import ess_ratio, trimmed_variance, wald_p
+from learner.gap.stats import ess_ratio, trimmed_variance
 from simbridge.effects.ground import cutoff_height_m
 from simbridge.vehicle import Vehicle
 
 STRIDE = 2  # fit on every 2nd row: neighbours are strongly correlated anyway
 Z_EXCITE = 8.0  # a typical-size effect must stand this many noise sigmas out of the data
-ALPHA = 0.001  # family-wise error of one forward step (Bonferroni over the candidates tried);
-# strict because the block sandwich from ~20 one-second blocks a flight runs at about twice
-# its nominal level (tests/test_gap_stats.py: 11% at 5%)
-MIN_SIZE = 0.25  # an effect smaller than this share of its catalogue magnitude (`typical`, "a
-# magnitude worth finding") is not reported: a large effect's slight misfit is absorbed by a
-# significant but tiny companion (ground effect rho 2.5 leaves a 1 ms "latency", p 1e-37)
 COLLINEAR_R2 = 0.98  # above: the data cannot tell two candidates apart
 DRAGS = ("rotor_drag", "body_drag")
 # effects whose force at a row depends on the rows before it (a lag, a coasting rotor, a late
@@ -439,80 +433,3 @@ def collinearity_r2(a: np.ndarray, b: np.ndarray) -> float:
     explained = b @ coef
     share = np.sum(explained**2, axis=0) / np.maximum(np.sum(a**2, axis=0), 1e-300)
     return float(np.min(share))
-
-
-def null_values(name: str, nominal: Values) -> np.ndarray:
-    """The candidate's parameters when it adds nothing: the nominal world's, else its null
-    (zeros: no ground/ceiling gain, no wall gain, drag, wind, lag, scale error, bias or delay;
-    a thrust curve's exponent 1)."""
-    if name in nominal:
-        return np.asarray(nominal[name], dtype=float)
-    return CANDIDATES[name].null_values()
-
-
-def added_p(f: Fit, name: str, nominal: Values) -> float:
-    """Wald p-value of 'the candidate `name` added in fit `f` is at its null values', with the
-    fit's block-robust covariance (correlated residuals, misspecification)."""
-    i = 0
-    for n in f.names:
-        k = len(CANDIDATES[n].params)
-        if n == name:
-            idx = slice(i, i + k)
-            return wald_p(f.values[name] - null_values(name, nominal), f.cov[idx, idx])
-        i += k
-    raise KeyError(name)
-
-
-def effect_size(
-    name: str, value: np.ndarray, nominal: Values, cat: dict[str, Candidate] | None = None
-) -> float:
-    """The added effect's largest parameter departure from its null, in catalogue magnitudes."""
-    typical = np.abs(np.asarray((cat or CANDIDATES)[name].typical, dtype=float))
-    return float(np.max(np.abs(np.asarray(value) - null_values(name, nominal)) / typical))
-
-
-def bound_hits(name: str, value: np.ndarray, cat: dict[str, Candidate] | None = None) -> list[dict]:
-    """The parameters sitting on a bound: a compensating, implausible solution (thrust scale
-    0.5 against a 4.9 m/s^2 bias) on which the Wald test does not hold, or an effect stronger
-    than the catalogue's range. A non-negative quantity's floor (no drag along z, the shortest
-    lag) is no such bound; a lower bound below the null (a wind's, a thrust curve's) is."""
-    c = (cat or CANDIDATES)[name]
-    lo, hi, null = np.asarray(c.lo), np.asarray(c.hi), c.null_values()
-    tol = 1e-3 * (hi - lo)
-    v = np.asarray(value)
-    out = []
-    for i, p in enumerate(c.params):
-        side = "low" if lo[i] < null[i] and v[i] - lo[i] <= tol[i] else None
-        side = "high" if hi[i] - v[i] <= tol[i] else side
-        if side:
-            bound = float(lo[i] if side == "low" else hi[i])
-            out.append({"parameter": p, "value": float(v[i]), "bound": bound, "side": side})
-    return out
-
-
-def at_bound(name: str, value: np.ndarray, cat: dict[str, Candidate] | None = None) -> bool:
-    """Whether a parameter sits on a bound (`bound_hits`)."""
-    return bool(bound_hits(name, value, cat))
-
-
-def selected(
-    bic_drop: float,
-    p_value: float,
-    tried: int,
-    cv_gain: float,
-    size: float = np.inf,
-    interior: bool = True,
-) -> bool:
-    """The selection rule for one forward step, free of the residual's scale: the information
-    criterion on the effective sample size falls; the added effect is significant (Wald test,
-    block-robust covariance, family-wise ALPHA over the `tried` candidates: Bonferroni); the
-    flights left out are predicted better (cross-validated explained variance rises: no
-    overfit); the effect is of a relevant size (MIN_SIZE catalogue magnitudes); and no
-    parameter sits on its bound (`interior`)."""
-    return (
-        interior
-        and bic_drop > 0.0
-        and p_value < ALPHA / max(tried, 1)
-        and cv_gain > 0.0
-        and size >= MIN_SIZE
-    )

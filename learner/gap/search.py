@@ -1,6 +1,6 @@
 """The forward search over catalogue effects: at every step every remaining candidate is fitted
 with the effects already chosen (the catalogue is small), and the candidates are tried in
-order of the information criterion until one passes the selection rule (`fit.selected`) and
+order of the information criterion until one passes the selection rule (`selection.selected`) and
 leaves a set that is physical as a whole: no parameter of any member on a bound of the fit or
 outside its physical range (a later effect can push an earlier one there), and no two members
 cancelling each other (a thrust scale of 0.5 against a 5 m/s^2 accelerometer bias fits any
@@ -17,19 +17,15 @@ from learner.gap.candidates import implausible_parameters
 from learner.gap.fit import (
     COLLINEAR_R2,
     DRAGS,
-    MIN_SIZE,
     STRIDE,
     Fit,
     Problem,
-    added_p,
-    bound_hits,
     collinearity_r2,
     cross_validated_ev,
-    effect_size,
     fit,
-    selected,
     sensitivities,
 )
+from learner.gap.selection import ALPHA, MIN_SIZE, added_p, bound_hits, effect_size, selected
 
 CANCEL_COSINE = -0.7  # two members' contributions this opposed ...
 CANCEL_CORRELATION = 0.9  # ... with parameters this correlated: one unidentifiable group
@@ -280,6 +276,4 @@ def _judge(
 
 
 def _alpha(tried: int) -> float:
-    from learner.gap.fit import ALPHA
-
     return ALPHA / max(tried, 1)

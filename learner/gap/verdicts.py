@@ -14,6 +14,7 @@ from learner.gap import bias_or_tilt
 from learner.gap import fit as gapfit
 from learner.gap.candidates import CANDIDATES, Values, implausible_parameters
 from learner.gap.flightdata import FlightData
+from learner.gap.selection import at_bound
 from simbridge.vehicle import Vehicle
 
 Z_CRIT = 1.959964
@@ -179,7 +180,7 @@ def _alternatives_ruled_out(
                 f"it would take {h['parameter']} {h['value']:.3g}, outside its physical range "
                 f"[{h['range'][0]:.3g}, {h['range'][1]:.3g}]"
             )
-        elif gapfit.at_bound(other, alt.values[other], cat):
+        elif at_bound(other, alt.values[other], cat):
             out[other] = "it would sit on a bound of the search"
         # worse as a whole, it may still trade off against part of the effect (an
         # accelerometer's z bias against a thrust scale, beside an x bias)
