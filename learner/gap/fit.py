@@ -21,7 +21,7 @@ from learner.gap.stats import ess_ratio, trimmed_variance
 from simbridge.effects.ground import cutoff_height_m
 from simbridge.vehicle import Vehicle
 
-STRIDE = 2  # fit on every 2nd row: neighbours are strongly correlated anyway
+STRIDE = 2  # the search fits every 2nd row: enough to rank sets (`final_fit`: every row)
 Z_EXCITE = 8.0  # a typical-size effect must stand this many noise sigmas out of the data
 COLLINEAR_R2 = 0.98  # above: the data cannot tell two candidates apart
 DRAGS = ("rotor_drag", "body_drag")
@@ -324,8 +324,8 @@ def final_fit(problem: Problem, chosen: Fit) -> Fit:
     STRIDE-th row, which is enough to rank them at half the work; the values it reports take
     all the data: a log's sensor noise is white from one sample to the next, so the rows in
     between carry as much information as those fitted, and a weakly excited parameter's error
-    grows without them (the gap bench's hover: a rotor drag 13.9% low on every 2nd row, 3.4%
-    on all). The problem's effective sample size becomes that of every row: a fit compared
+    grows without them (the gap bench's hover: a rotor drag's kxy 13.9% low on every 2nd
+    row, 3.1% on all). The problem's effective sample size becomes that of every row: a fit compared
     with this one from now on is made on every row too (`every_row=chosen.every_row`)."""
     if not chosen.names:
         return chosen
