@@ -11,7 +11,10 @@ ratio holds where the absolute figure does not).
   the same client. The lockstep runs over both of the simulator's transports: the
   Unix-domain socket our flights use (`groundfx fly`, the campaigns: both ends ours) and
   TCP, as any PX4-protocol autopilot connects; the ping-pong over TCP, as pymavlink's
-  `mavutil` connects (it has no Unix-domain sockets).
+  `mavutil` connects (it has no Unix-domain sockets). The client holds the vehicle hovering
+  in ground effect at 0.1 m, as in the physics figure. Each loop also reports the CPU time
+  each end spent a step (`*_cpu_us_per_step`): a loop of two alternating processes runs at
+  the pace of its busier end, which these say.
 """
 
 from __future__ import annotations
@@ -91,59 +94,96 @@ def bare_loop_rtf(world: World, vehicle: Vehicle, seconds: float) -> dict[str, f
     return {"bare_loop_rtf": seconds / wall, "bare_loop_us_per_step": wall / steps * 1e6}
 
 
-def _lockstep(sock: Any, steps: int, command: Any) -> float:
+def process_cpu_s(pid: int) -> float | None:
+    """CPU time (user + system) another process has used so far, from /proc (Linux); None
+    where that cannot be read. Its resolution is a clock tick (10 ms): a run of a few tenths
+    of a second a figure reads to a few per cent."""
     try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _lockstep(sock: Any, steps: int, command: Any, server_pid: int) -> dict[str, float]:
+    """Run the loop; its wall time and the CPU time each end spent in it (per step, us):
+    the loop runs at the pace of the busier end."""
+    try:
+        server0, client0 = process_cpu_s(server_pid), time.process_time()
         t0 = time.perf_counter()
         run_lockstep(sock, steps, command)
         wall = time.perf_counter() - t0
+        client1, server1 = time.process_time(), process_cpu_s(server_pid)
         end_lockstep(sock)
-        return wall
     finally:
         sock.close()
+    cpu = {"client_cpu_us": (client1 - client0) / steps * 1e6}
+    if server0 is not None and server1 is not None:
+        cpu["server_cpu_us"] = (server1 - server0) / steps * 1e6
+    return {"wall": wall, **cpu}
+
+
+def _hover_command(world: World, vehicle: Vehicle) -> Any:
+    """Constant actuators holding the vehicle at BENCH_ALTITUDE_M in ground effect: each of
+    the loop's physics steps evaluates the effect, as in the physics figure."""
+    return constant(hover_fraction(_hover_rad_s(world, vehicle), vehicle.max_rotor_speed_rad_s))
+
+
+def _loop_figures(
+    prefix: str, server: str, run: dict[str, float], steps: int, period_s: float
+) -> dict[str, float]:
+    """`{prefix}_rtf`, `_us_per_step`, and the CPU each end spent a step in the loop
+    (`{prefix}_{server}_cpu_us_per_step`, `{prefix}_client_cpu_us_per_step`)."""
+    figures = {
+        f"{prefix}_rtf": steps * period_s / run["wall"],
+        f"{prefix}_us_per_step": run["wall"] / steps * 1e6,
+        f"{prefix}_client_cpu_us_per_step": run["client_cpu_us"],
+    }
+    if "server_cpu_us" in run:
+        figures[f"{prefix}_{server}_cpu_us_per_step"] = run["server_cpu_us"]
+    return figures
 
 
 def lockstep_rtf(
-    world_name: str, vehicle: Vehicle, control_period_s: float, seconds: float, kind: str
+    world_path: str, world: World, vehicle: Vehicle, seconds: float, kind: str
 ) -> dict[str, Any]:
     """`groundfx sim` in its own process against a minimal pymavlink client, constant
     actuators, over a Unix-domain socket (`kind` "unix": keys `lockstep_*`) or TCP ("tcp":
     `lockstep_tcp_*`)."""
-    steps = max(1, round(seconds / control_period_s))
-    command = constant(
-        hover_fraction(vehicle.hover_rotor_speed_rad_s, vehicle.max_rotor_speed_rad_s)
-    )
+    period_s = world.control_period_s
+    steps = max(1, round(seconds / period_s))
+    command = _hover_command(world, vehicle)
     start = f"0,0,{BENCH_ALTITUDE_M}"
     if kind == transport.UNIX:
         with tempfile.TemporaryDirectory(prefix="groundfx-bench-") as folder:
             path = Path(folder) / "sim.sock"
-            proc = spawn_local_sim(world_name, path, start=start)
+            proc = spawn_local_sim(world_path, path, start=start)
             try:
                 sock = transport.connect(f"unix:{path}", timeout_s=30.0)
             except ConnectionError:
                 proc.kill()
                 _, err = proc.communicate(timeout=10)
                 raise SimProcessError(f"groundfx sim did not start: {err.strip()}") from None
-            wall = _lockstep(sock, steps, command)
+            run = _lockstep(sock, steps, command, proc.pid)
             last_line = finish(proc)
         prefix = "lockstep"
     else:
-        proc, port = start_sim(world_name, speedup="max", start=start)
-        wall = _lockstep(connect("127.0.0.1", port), steps, command)
+        proc, port = start_sim(world_path, speedup="max", start=start)
+        run = _lockstep(connect("127.0.0.1", port), steps, command, proc.pid)
         last_line = finish(proc)
         prefix = "lockstep_tcp"
     return {
-        f"{prefix}_rtf": steps * control_period_s / wall,
-        f"{prefix}_us_per_step": wall / steps * 1e6,
+        **_loop_figures(prefix, "sim", run, steps, period_s),
         f"{prefix.replace('lockstep', 'sim')}_report": last_line,
     }
 
 
-def pingpong_rtf(
-    world_name: str, vehicle: Vehicle, control_period_s: float, seconds: float
-) -> dict[str, Any]:
+def pingpong_rtf(world_path: str, world: World, vehicle: Vehicle, seconds: float) -> dict[str, Any]:
     """The reference: `simbridge.pingpong` with the same client, as many steps."""
-    steps = max(1, round(seconds / control_period_s))
-    cmd = [sys.executable, "-m", "simbridge.pingpong", "--world", world_name]
+    period_s = world.control_period_s
+    steps = max(1, round(seconds / period_s))
+    cmd = [sys.executable, "-m", "simbridge.pingpong", "--world", world_path]
     cmd += ["--altitude", str(BENCH_ALTITUDE_M), "--steps", str(steps)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None
@@ -151,16 +191,10 @@ def pingpong_rtf(
     if not line.startswith(LISTENING):
         proc.kill()
         raise SimProcessError(f"the ping-pong reference did not start: {line.strip()}")
-    command = constant(
-        hover_fraction(vehicle.hover_rotor_speed_rad_s, vehicle.max_rotor_speed_rad_s)
-    )
-    wall = _lockstep(connect("127.0.0.1", int(line.rsplit(":", 1)[1])), steps, command)
+    sock = connect("127.0.0.1", int(line.rsplit(":", 1)[1]))
+    run = _lockstep(sock, steps, _hover_command(world, vehicle), proc.pid)
     report = finish(proc)
-    return {
-        "pingpong_rtf": steps * control_period_s / wall,
-        "pingpong_us_per_step": wall / steps * 1e6,
-        "pingpong_report": report,
-    }
+    return {**_loop_figures("pingpong", "server", run, steps, period_s), "pingpong_report": report}
 
 
 def wake_latency(report: str) -> str:
@@ -183,9 +217,9 @@ def bench_sim(
         for figure in (
             physics_rtf(world, vehicle, seconds),
             bare_loop_rtf(world, vehicle, seconds),
-            lockstep_rtf(path, vehicle, world.control_period_s, seconds, transport.UNIX),
-            pingpong_rtf(path, vehicle, world.control_period_s, seconds),
-            lockstep_rtf(path, vehicle, world.control_period_s, seconds, transport.TCP),
+            lockstep_rtf(path, world, vehicle, seconds, transport.UNIX),
+            pingpong_rtf(path, world, vehicle, seconds),
+            lockstep_rtf(path, world, vehicle, seconds, transport.TCP),
         ):
             last.update(figure)
             for key, value in figure.items():

@@ -33,6 +33,9 @@ def test_bench_sim_prints_its_figures_as_json():
     assert figures["effects"] == ["ground_effect"] and figures["physics_hz"] == 1000
     assert figures["control_hz"] == 250
     assert figures["physics_altitude_drift_m"] < 1e-3  # it benchmarks a hovering drone
+    # where the time goes: the CPU each end of each loop spent a step (Linux /proc)
+    for key in ("lockstep_sim", "lockstep_client", "pingpong_server", "pingpong_client"):
+        assert figures[f"{key}_cpu_us_per_step"] >= 0.0
     assert "autopilot disconnected; 250 steps" in figures["sim_report"]
     # the loop and its reference wake up alike: both say what became of the latency request
     assert figures["cpu_wake_latency"].startswith("CPU wake-up latency")

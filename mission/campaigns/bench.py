@@ -34,9 +34,7 @@ def bench_sitl(world: str = "default", repeat: int = 5) -> dict[str, Any]:
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(repeat):
-            ping = pingpong_rtf(
-                str(resolve_world_path(world)), vehicle, world_obj.control_period_s, 16.0
-            )
+            ping = pingpong_rtf(str(resolve_world_path(world)), world_obj, vehicle, 16.0)
             reference.append(ping["pingpong_rtf"])
             off.append(
                 fly(BENCH_MISSION, world, "analytic", speedup="max", via_gcs=False, record=False)

@@ -111,6 +111,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
             f"({r['pingpong_us_per_step']:.0f} us): {r['lockstep_ratio']:.2f} and "
             f"{r['lockstep_tcp_ratio']:.2f} of it"
         )
+        if "lockstep_sim_cpu_us_per_step" in r and "pingpong_server_cpu_us_per_step" in r:
+            print(
+                f"CPU a step in the loop: simulator {r['lockstep_sim_cpu_us_per_step']:.0f} us, "
+                f"its client {r['lockstep_client_cpu_us_per_step']:.0f} us; ping-pong server "
+                f"{r['pingpong_server_cpu_us_per_step']:.0f} us, its client "
+                f"{r['pingpong_client_cpu_us_per_step']:.0f} us (each loop runs at the pace of "
+                "its busier end)"
+            )
         print(f"both lockstep loops: {r['cpu_wake_latency'] or 'CPU wake-up latency unknown'}")
         print(
             f"medians of {r['repeat']} interleaved runs; load average "
