@@ -69,6 +69,29 @@ def pressure_hpa(altitude_amsl_m: float) -> float:
     return 1013.25 * (1.0 - 2.25577e-5 * altitude_amsl_m) ** 5.25588
 
 
+def _begins_period(step: int, rate: float) -> bool:
+    """Whether a clock of `rate` periods a step begins one at `step` (step 0 always)."""
+    # the tolerance keeps whole-step periods (50 Hz at 250 Hz: every 5th) exact in floats
+    return step == 0 or math.floor(step * rate + 1e-9) > math.floor((step - 1) * rate + 1e-9)
+
+
+def _next_due(rate: float, step: int) -> float:
+    """The first step from `step` on at which a clock of `rate` begins a period (inf: none):
+    the same steps as `_begins_period` asked at each, found by the count of periods begun,
+    which only grows with the step, from a guess the rate gives."""
+    if rate <= 0.0:
+        return math.inf
+    if _begins_period(step, rate):
+        return step
+    begun = math.floor(step * rate + 1e-9)
+    guess = max(step + 1, math.ceil((begun + 1) / rate))
+    while guess - 1 > step and math.floor((guess - 1) * rate + 1e-9) > begun:
+        guess -= 1
+    while math.floor(guess * rate + 1e-9) <= begun:
+        guess += 1
+    return guess
+
+
 def _int16(v: float) -> int:
     return max(-32767, min(32767, round(v)))
 
@@ -157,6 +180,7 @@ class HilEncoder:
             "esc": world.samples_per_step(rates.esc_hz),
             "truth": world.samples_per_step(rates.truth_hz),
         }
+        self._due_step = dict.fromkeys(self._per_step, -1.0)  # -1: found at the first ask
         # the step of the last range-and-flow sample (the first integrates one nominal period)
         per_step = self._per_step["distance"]
         self._distance_step = -max(1, round(1.0 / per_step)) if per_step > 0.0 else 0
@@ -166,13 +190,13 @@ class HilEncoder:
 
     def _due(self, name: str) -> bool:
         """Whether the sensor's own clock began a period at this step: it samples at its
-        rate on average, not at a rate rounded to a whole number of steps."""
-        rate = self._per_step[name]
-        if rate <= 0.0:
-            return False
+        rate on average, not at a rate rounded to a whole number of steps. Asked every step;
+        the next such step is found when the last one has passed (`_next_due`)."""
         n = self._steps
-        # the tolerance keeps whole-step periods (50 Hz at 250 Hz: every 5th) exact in floats
-        return n == 0 or math.floor(n * rate + 1e-9) > math.floor((n - 1) * rate + 1e-9)
+        due = self._due_step[name]
+        if n > due:
+            due = self._due_step[name] = _next_due(self._per_step[name], n)
+        return n == due
 
     def encode(
         self, state: VehicleState, time_us: int, ground_effect_n: Vec3 | None = None

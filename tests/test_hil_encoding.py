@@ -152,3 +152,30 @@ def test_an_imu_delay_between_control_periods_is_interpolated_not_rounded():
         rates.append(decode(encoder.encode(s, 4000 * k))["HIL_SENSOR"][0].xgyro)
     # the rate at t is 0.1 per 4 ms; at t - 10 ms it is 0.1 (k - 2.5), once the history holds it
     assert rates[3:] == pytest.approx([0.1 * (k - 2.5) for k in range(3, 8)])
+
+
+@pytest.mark.parametrize("rate", [0.04, 0.2, 0.4, 0.5, 1.0, 2.0, 1 / 3, 0.37, 0.123456, 0.999, 0.0])
+def test_a_sensor_samples_on_the_steps_its_own_clock_begins_a_period(rate):
+    """The encoder finds each sensor's next sampling step once the last has passed; the steps
+    are those at which floor(n * rate) grows, as when it asked at every step (rates that are
+    no whole fraction of the control rate alternate their intervals)."""
+    from simbridge.hil import _begins_period, _next_due
+
+    def asked_every_step(n):
+        return rate > 0.0 and _begins_period(n, rate)
+
+    expected = [n for n in range(3100) if asked_every_step(n)]  # past the steps asked
+    if rate > 0.0:
+        counts = [math.floor(n * rate + 1e-9) for n in expected]
+        assert counts == sorted(set(counts))  # one sample per period begun
+    due, found = -1.0, []
+    for n in range(3000):
+        if n > due:
+            due = _next_due(rate, n)
+        if n == due:
+            found.append(n)
+    assert found == [n for n in expected if n < 3000]
+    # asked at scattered steps, it answers as at every step
+    for n in range(0, 3000, 7):
+        first = next((m for m in expected if m >= n), math.inf)
+        assert _next_due(rate, n) == first
