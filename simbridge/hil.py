@@ -69,23 +69,18 @@ def pressure_hpa(altitude_amsl_m: float) -> float:
     return 1013.25 * (1.0 - 2.25577e-5 * altitude_amsl_m) ** 5.25588
 
 
-def _begins_period(step: int, rate: float) -> bool:
-    """Whether a clock of `rate` periods a step begins one at `step` (step 0 always)."""
-    # the tolerance keeps whole-step periods (50 Hz at 250 Hz: every 5th) exact in floats
-    return step == 0 or math.floor(step * rate + 1e-9) > math.floor((step - 1) * rate + 1e-9)
-
-
 def _next_due(rate: float, step: int) -> float:
-    """The first step from `step` on at which a clock of `rate` begins a period (inf: none):
-    the same steps as `_begins_period` asked at each, found by the count of periods begun,
-    which only grows with the step, from a guess the rate gives."""
+    """The first step from `step` on at which a clock of `rate` periods a step begins one
+    (inf: never): step 0, then each step at which floor(n * rate) grows (the tolerance keeps
+    whole-step periods, 50 Hz at 250 Hz every 5th, exact in floats). That count only grows
+    with the step: searched from the guess the rate gives, not asked at every step."""
     if rate <= 0.0:
         return math.inf
-    if _begins_period(step, rate):
-        return step
-    begun = math.floor(step * rate + 1e-9)
-    guess = max(step + 1, math.ceil((begun + 1) / rate))
-    while guess - 1 > step and math.floor((guess - 1) * rate + 1e-9) > begun:
+    if step == 0:
+        return 0
+    begun = math.floor((step - 1) * rate + 1e-9)  # periods begun before `step`
+    guess = max(step, math.ceil((begun + 1) / rate))
+    while guess > step and math.floor((guess - 1) * rate + 1e-9) > begun:
         guess -= 1
     while math.floor(guess * rate + 1e-9) <= begun:
         guess += 1

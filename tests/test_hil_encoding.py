@@ -159,10 +159,12 @@ def test_a_sensor_samples_on_the_steps_its_own_clock_begins_a_period(rate):
     """The encoder finds each sensor's next sampling step once the last has passed; the steps
     are those at which floor(n * rate) grows, as when it asked at every step (rates that are
     no whole fraction of the control rate alternate their intervals)."""
-    from simbridge.hil import _begins_period, _next_due
+    from simbridge.hil import _next_due
 
-    def asked_every_step(n):
-        return rate > 0.0 and _begins_period(n, rate)
+    def asked_every_step(n):  # the rule as the encoder asked it at every step before
+        if rate <= 0.0:
+            return False
+        return n == 0 or math.floor(n * rate + 1e-9) > math.floor((n - 1) * rate + 1e-9)
 
     expected = [n for n in range(3100) if asked_every_step(n)]  # past the steps asked
     if rate > 0.0:
