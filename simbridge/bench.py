@@ -14,7 +14,12 @@ ratio holds where the absolute figure does not).
   `mavutil` connects (it has no Unix-domain sockets). The client holds the vehicle hovering
   in ground effect at 0.1 m, as in the physics figure. Each loop also reports the CPU time
   each end spent a step (`*_cpu_us_per_step`): a loop of two alternating processes runs at
-  the pace of its busier end, which these say.
+  the pace of its busier end, which these say;
+- lockstep against a pymavlink simulator with physics: the same ping-pong stepping the
+  physics reference (the bare loop, `simbridge/bare_loop.py`) for a control period after
+  each reply, as our simulator steps its physics between a reply and its next tick
+  (`lockstep_physics_ratio`): what our link and sensors cost beside pymavlink's, with the
+  physics in both loops.
 """
 
 from __future__ import annotations
@@ -29,12 +34,12 @@ from pathlib import Path
 from typing import Any
 
 from simbridge import transport
+from simbridge.bare_loop import BareQuadrotor
 from simbridge.client import connect, constant, end_lockstep, hover_fraction, run_lockstep
 from simbridge.effects.ground import hover_rotor_speed_in_ground_effect_rad_s
 from simbridge.launch import SimProcessError, finish, spawn_local_sim, start_sim
 from simbridge.physics import Simulation
 from simbridge.pingpong import LISTENING
-from simbridge.pybullet_quiet import pybullet as pb
 from simbridge.vehicle import Vehicle, load_vehicle
 from simbridge.world import World, load_world, resolve_world_path, with_start
 
@@ -76,20 +81,10 @@ def physics_rtf(world: World, vehicle: Vehicle, seconds: float) -> dict[str, flo
 def bare_loop_rtf(world: World, vehicle: Vehicle, seconds: float) -> dict[str, float]:
     """The reference: the same body in the same world, stepped by a bare quadrotor loop."""
     steps = max(1, round(seconds * world.physics_rate_hz))
-    thrust = [0.0, 0.0, vehicle.weight_n / 4.0]
-    no_moment = [0.0, 0.0, 0.0]
-    hubs = vehicle.rotor_positions_body_m()
     with Simulation(with_start(world, (0.0, 0.0, BENCH_ALTITUDE_M)), vehicle) as sim:
-        sim.release()
-        cid, body = sim._cid, sim._body
+        bare = BareQuadrotor(sim, vehicle)
         t0 = time.perf_counter()
-        for _ in range(steps):
-            pb.getBasePositionAndOrientation(body, physicsClientId=cid)
-            pb.getBaseVelocity(body, physicsClientId=cid)
-            for hub in hubs:
-                pb.applyExternalForce(body, -1, thrust, hub, pb.LINK_FRAME, physicsClientId=cid)
-            pb.applyExternalTorque(body, -1, no_moment, pb.LINK_FRAME, physicsClientId=cid)
-            pb.stepSimulation(physicsClientId=cid)
+        bare.run(steps)
         wall = time.perf_counter() - t0
     return {"bare_loop_rtf": seconds / wall, "bare_loop_us_per_step": wall / steps * 1e6}
 
@@ -179,12 +174,17 @@ def lockstep_rtf(
     }
 
 
-def pingpong_rtf(world_path: str, world: World, vehicle: Vehicle, seconds: float) -> dict[str, Any]:
-    """The reference: `simbridge.pingpong` with the same client, as many steps."""
+def pingpong_rtf(
+    world_path: str, world: World, vehicle: Vehicle, seconds: float, physics: bool = False
+) -> dict[str, Any]:
+    """The reference: `simbridge.pingpong` with the same client, as many steps (keys
+    `pingpong_*`); with `physics`, the ping-pong stepping the bare quadrotor loop after each
+    reply (`pingpong_physics_*`)."""
     period_s = world.control_period_s
     steps = max(1, round(seconds / period_s))
     cmd = [sys.executable, "-m", "simbridge.pingpong", "--world", world_path]
     cmd += ["--altitude", str(BENCH_ALTITUDE_M), "--steps", str(steps)]
+    cmd += ["--physics"] if physics else []
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None
     line = proc.stdout.readline()
@@ -194,7 +194,8 @@ def pingpong_rtf(world_path: str, world: World, vehicle: Vehicle, seconds: float
     sock = connect("127.0.0.1", int(line.rsplit(":", 1)[1]))
     run = _lockstep(sock, steps, _hover_command(world, vehicle), proc.pid)
     report = finish(proc)
-    return {**_loop_figures("pingpong", "server", run, steps, period_s), "pingpong_report": report}
+    prefix = "pingpong_physics" if physics else "pingpong"
+    return {**_loop_figures(prefix, "server", run, steps, period_s), f"{prefix}_report": report}
 
 
 def wake_latency(report: str) -> str:
@@ -220,6 +221,7 @@ def bench_sim(
             lockstep_rtf(path, world, vehicle, seconds, transport.UNIX),
             pingpong_rtf(path, world, vehicle, seconds),
             lockstep_rtf(path, world, vehicle, seconds, transport.TCP),
+            pingpong_rtf(path, world, vehicle, seconds, physics=True),
         ):
             last.update(figure)
             for key, value in figure.items():
@@ -236,15 +238,18 @@ def bench_sim(
         "sim_report": last["sim_report"],
         "sim_tcp_report": last["sim_tcp_report"],
         "pingpong_report": last["pingpong_report"],
+        "pingpong_physics_report": last["pingpong_physics_report"],
         # both lockstep loops ran with the same CPU wake-up latency (simbridge/cpu_latency.py)
         "cpu_wake_latency": wake_latency(last["sim_report"]),
         "physics_runs": runs["physics_rtf"],
         "lockstep_runs": runs["lockstep_rtf"],
         "lockstep_tcp_runs": runs["lockstep_tcp_rtf"],
         "pingpong_runs": runs["pingpong_rtf"],
+        "pingpong_physics_runs": runs["pingpong_physics_rtf"],
     }
     result["physics_ratio"] = result["physics_rtf"] / result["bare_loop_rtf"]
     result["lockstep_ratio"] = result["lockstep_rtf"] / result["pingpong_rtf"]
     result["lockstep_tcp_ratio"] = result["lockstep_tcp_rtf"] / result["pingpong_rtf"]
+    result["lockstep_physics_ratio"] = result["lockstep_rtf"] / result["pingpong_physics_rtf"]
     result["load_average"] = (load_before, os.getloadavg()[0])
     return result

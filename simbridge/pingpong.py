@@ -5,7 +5,10 @@ written with pymavlink would: its own connection (`mavutil`, `tcpin:`), and each
 very messages our simulator sends for such a step (taken from a short flight of the real
 encoder beforehand, then cycled) sent with `mav.send`, then the client's
 HIL_ACTUATOR_CONTROLS awaited with `recv_match`. No physics, no sensors: what the wire and
-pymavlink cost. `groundfx bench sim` runs the same minimal client against both. It holds the
+pymavlink cost. With `--physics`, a pymavlink simulator with physics: after each reply it
+steps the simulator's body by the bare quadrotor loop (simbridge/bare_loop.py, the physics
+figure's reference) for a control period, as our simulator steps its own physics between a
+reply and the next tick. `groundfx bench sim` runs the same minimal client against all. It holds the
 same CPU wake-up latency request as the simulator does at full speed (simbridge/cpu_latency.py),
 so that the reference and the measured loop wake up alike.
 """
@@ -15,10 +18,12 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 from pymavlink import mavutil
 
+from simbridge.bare_loop import BareQuadrotor
 from simbridge.cpu_latency import CpuLatencyRequest
 from simbridge.hil import HilEncoder, mavlink
 from simbridge.physics import Simulation
@@ -46,13 +51,22 @@ def sample_steps(world_name: str, altitude_m: float) -> list[list[Any]]:
     return steps
 
 
-def serve(conn: Any, steps: list[list[Any]], count: int, timeout_s: float) -> int:
-    """`count` steps (fewer if the client stops answering); returns the steps served."""
+def serve(
+    conn: Any,
+    steps: list[list[Any]],
+    count: int,
+    timeout_s: float,
+    physics: Callable[[], None] | None = None,
+) -> int:
+    """`count` steps (fewer if the client stops answering), `physics` (if any) run after each
+    reply; returns the steps served."""
     for served in range(count):
         for m in steps[served % len(steps)]:
             conn.mav.send(m)
         if conn.recv_match(type="HIL_ACTUATOR_CONTROLS", blocking=True, timeout=timeout_s) is None:
             return served
+        if physics is not None:
+            physics()
     return count
 
 
@@ -62,6 +76,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, required=True, help="steps to serve")
     p.add_argument("--altitude", type=float, default=0.1, help="hover height of the sample, m")
     p.add_argument(
+        "--physics",
+        action="store_true",
+        help="step the bare quadrotor loop for a control period after each reply",
+    )
+    p.add_argument(
         "--low-latency-idle",
         action=argparse.BooleanOptionalAction,
         default=True,
@@ -69,6 +88,18 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = p.parse_args(argv)
     steps = sample_steps(args.world, args.altitude)
+    if not args.physics:
+        return _serve_client(args, steps, None)
+    world = with_start(load_world(args.world), (0.0, 0.0, args.altitude))
+    vehicle = load_vehicle(world.vehicle)
+    with Simulation(world, vehicle) as sim:
+        bare, substeps = BareQuadrotor(sim, vehicle), world.substeps
+        return _serve_client(args, steps, lambda: bare.run(substeps))
+
+
+def _serve_client(
+    args: argparse.Namespace, steps: list[list[Any]], physics: Callable[[], None] | None
+) -> int:
     conn = mavutil.mavlink_connection("tcpin:127.0.0.1:0", source_system=1, source_component=200)
     print(f"{LISTENING}127.0.0.1:{conn.listen.getsockname()[1]}", flush=True)
     while conn.port is None:  # mavutil accepts in recv, and drops what is sent before
@@ -76,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         conn.recv()
     with CpuLatencyRequest(0, not_asked="" if args.low_latency_idle else "declined") as request:
         t0 = time.perf_counter()
-        served = serve(conn, steps, args.steps, timeout_s=10.0)
+        served = serve(conn, steps, args.steps, timeout_s=10.0, physics=physics)
         wall = time.perf_counter() - t0
     conn.close()
     print(f"groundfx pingpong: {served} steps in {wall:.2f} s; {request.describe()}", flush=True)

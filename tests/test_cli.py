@@ -29,12 +29,17 @@ def test_bench_sim_prints_its_figures_as_json():
     # each beside its reference, measured in the same run
     assert figures["physics_ratio"] == figures["physics_rtf"] / figures["bare_loop_rtf"]
     assert figures["lockstep_ratio"] == figures["lockstep_rtf"] / figures["pingpong_rtf"]
+    # ... and against a pymavlink simulator with physics, which served every step too
+    physics = figures["lockstep_rtf"] / figures["pingpong_physics_rtf"]
+    assert figures["lockstep_physics_ratio"] == physics
+    assert "250 steps" in figures["pingpong_physics_report"]
     assert len(figures["load_average"]) == 2
     assert figures["effects"] == ["ground_effect"] and figures["physics_hz"] == 1000
     assert figures["control_hz"] == 250
     assert figures["physics_altitude_drift_m"] < 1e-3  # it benchmarks a hovering drone
     # where the time goes: the CPU each end of each loop spent a step (Linux /proc)
-    for key in ("lockstep_sim", "lockstep_client", "pingpong_server", "pingpong_client"):
+    for key in ("lockstep_sim", "lockstep_client", "pingpong_server", "pingpong_client",
+                "pingpong_physics_server", "pingpong_physics_client"):  # fmt: skip
         assert figures[f"{key}_cpu_us_per_step"] >= 0.0
     assert "autopilot disconnected; 250 steps" in figures["sim_report"]
     # the loop and its reference wake up alike: both say what became of the latency request

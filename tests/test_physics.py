@@ -18,6 +18,7 @@ from simbridge.effects.ground import CeilingEffectParams, GroundEffectParams
 from simbridge.effects.proximity import WallEffectParams
 from simbridge.frames import quat_from_euler
 from simbridge.physics import Simulation, with_effects
+from simbridge.pybullet_quiet import pybullet as pb
 from simbridge.vehicle import GRAVITY_M_S2, load_vehicle
 from simbridge.world import Box, load_world, with_start
 
@@ -231,3 +232,19 @@ def test_a_tilted_start_pose_is_honoured():
         quat_from_euler(math.radians(10), 0.0, math.radians(30))
     )
     assert state.time_s == pytest.approx(0.004)
+
+
+def test_the_bare_loop_reference_steps_the_body_it_is_given():
+    """`bench sim`'s physics reference (and the physics ping-pong's): the simulator's own body
+    under a bare quadrotor loop, its four thrusts holding the weight, so that the body hovers
+    where it starts, steps after steps, and its clock is PyBullet's."""
+    from simbridge.bare_loop import BareQuadrotor
+
+    world = world_with(None, start=(0.0, 0.0, 0.5))
+    with Simulation(world, VEHICLE) as sim:
+        bare = BareQuadrotor(sim, VEHICLE)
+        assert not sim.held  # released from its stand: PyBullet integrates it
+        bare.run(2000)
+        pos, _ = pb.getBasePositionAndOrientation(sim._body, physicsClientId=sim._cid)
+        vel, _ = pb.getBaseVelocity(sim._body, physicsClientId=sim._cid)
+    assert pos[2] == pytest.approx(0.5, abs=1e-6) and abs(vel[2]) < 1e-6

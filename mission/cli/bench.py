@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -111,13 +112,21 @@ def cmd_bench(args: argparse.Namespace) -> int:
             f"({r['pingpong_us_per_step']:.0f} us): {r['lockstep_ratio']:.2f} and "
             f"{r['lockstep_tcp_ratio']:.2f} of it"
         )
+        print(
+            f"          the ping-pong stepping the bare quadrotor loop after each reply (a "
+            f"pymavlink simulator with physics) {r['pingpong_physics_rtf']:.1f}x "
+            f"({r['pingpong_physics_us_per_step']:.0f} us): {r['lockstep_physics_ratio']:.2f} "
+            "of it"
+        )
         if "lockstep_sim_cpu_us_per_step" in r and "pingpong_server_cpu_us_per_step" in r:
             print(
                 f"CPU a step in the loop: simulator {r['lockstep_sim_cpu_us_per_step']:.0f} us, "
                 f"its client {r['lockstep_client_cpu_us_per_step']:.0f} us; ping-pong server "
                 f"{r['pingpong_server_cpu_us_per_step']:.0f} us, its client "
-                f"{r['pingpong_client_cpu_us_per_step']:.0f} us (each loop runs at the pace of "
-                "its busier end)"
+                f"{r['pingpong_client_cpu_us_per_step']:.0f} us; with physics "
+                f"{r.get('pingpong_physics_server_cpu_us_per_step', math.nan):.0f} and "
+                f"{r['pingpong_physics_client_cpu_us_per_step']:.0f} us (each loop runs at the "
+                "pace of its busier end)"
             )
         print(f"both lockstep loops: {r['cpu_wake_latency'] or 'CPU wake-up latency unknown'}")
         print(
