@@ -8,9 +8,9 @@ HIL_ACTUATOR_CONTROLS awaited with `recv_match`. No physics, no sensors: what th
 pymavlink cost. With `--physics`, a pymavlink simulator with physics: after each reply it
 steps the simulator's body by the bare quadrotor loop (simbridge/bare_loop.py, the physics
 figure's reference) for a control period, as our simulator steps its own physics between a
-reply and the next tick. `groundfx bench sim` runs the same minimal client against all. It holds the
-same CPU wake-up latency request as the simulator does at full speed (simbridge/cpu_latency.py),
-so that the reference and the measured loop wake up alike.
+reply and the next tick. `groundfx bench sim` runs the same minimal client against all. It
+holds the same CPU wake-up latency request as the simulator does at full speed
+(simbridge/cpu_latency.py), so that the reference and the measured loop wake up alike.
 """
 
 from __future__ import annotations

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -124,7 +123,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
                 f"its client {r['lockstep_client_cpu_us_per_step']:.0f} us; ping-pong server "
                 f"{r['pingpong_server_cpu_us_per_step']:.0f} us, its client "
                 f"{r['pingpong_client_cpu_us_per_step']:.0f} us; with physics "
-                f"{r.get('pingpong_physics_server_cpu_us_per_step', math.nan):.0f} and "
+                f"{r['pingpong_physics_server_cpu_us_per_step']:.0f} and "
                 f"{r['pingpong_physics_client_cpu_us_per_step']:.0f} us (each loop runs at the "
                 "pace of its busier end)"
             )
