@@ -5,12 +5,18 @@ BIN    := $(VENV)/bin
 
 .PHONY: install compile demo test lint bench clean
 
+# uv installs what pip resolves, the same versions, in a seventh of pip's time (10 s against
+# 69 s from a fresh clone here). It reads no pip configuration: the local wheel cache that
+# holds the CPU build of torch is passed on from pip's (PIP_FIND_LINKS, or pip.conf).
+FIND_LINKS ?= $(or $(PIP_FIND_LINKS),$(shell $(PYTHON) -m pip config get global.find-links 2>/dev/null))
+UV = $(BIN)/uv pip install --quiet --python $(BIN)/python $(foreach d,$(FIND_LINKS),--find-links $(d))
+
 $(BIN)/groundfx: pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -c constraints.txt -e '.[dev,ray,parquet]'
+	$(BIN)/pip install --quiet uv==0.13.9
+	$(UV) -c constraints.txt -e '.[dev,ray,parquet]'
 # MAVProxy for tests/test_mavproxy.py, without its GUI deps (wxPython, OpenCV, VTK)
-	$(BIN)/pip install --quiet --no-deps MAVProxy==1.8.75
+	$(UV) --no-deps MAVProxy==1.8.75
 	touch $@
 
 install: $(BIN)/groundfx

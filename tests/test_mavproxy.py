@@ -135,6 +135,13 @@ class Listener:
         self.link.close()
 
 
+def param_value(line: str, name: str) -> float | None:
+    """`name`'s value in a `param show` line; None for any other line. MAVProxy may print
+    its prompt right after the value, before the line's end ("NAV_ACC_RAD 0.02LOITER>")."""
+    m = re.match(rf"{name}\s+(-?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)", line)
+    return float(m[1]) if m else None
+
+
 @pytest.mark.parametrize("identity", IDENTITIES)
 def test_mavproxy_loads_the_wpl_file_arms_starts_it_and_sees_every_item_reached(
     vehicle, identity, tmp_path
@@ -150,10 +157,7 @@ def test_mavproxy_loads_the_wpl_file_arms_starts_it_and_sees_every_item_reached(
         mavproxy.send(f"param set NAV_ACC_RAD {LANDING_ACCEPTANCE_M}")
         mavproxy.ask_until(  # the set is queued: its PARAM_VALUE reply updates the cache
             "param show NAV_ACC_RAD",
-            lambda s: (
-                s.split()[:1] == ["NAV_ACC_RAD"]
-                and float(s.split()[1]) == pytest.approx(LANDING_ACCEPTANCE_M)
-            ),
+            lambda s: param_value(s, "NAV_ACC_RAD") == pytest.approx(LANDING_ACCEPTANCE_M),
             f"NAV_ACC_RAD {LANDING_ACCEPTANCE_M} from the vehicle",
         )
         mavproxy.send(f"wp load {EXAMPLES / 'square.waypoints'}")
