@@ -5,11 +5,12 @@ BIN    := $(VENV)/bin
 
 .PHONY: install compile demo test lint bench clean
 
-# uv installs what pip resolves, the same versions, in a seventh of pip's time (10 s against
-# 69 s from a fresh clone here). It reads no pip configuration: the local wheel cache that
-# holds the CPU build of torch is passed on from pip's (PIP_FIND_LINKS, or pip.conf).
+# uv installs what pip resolves, the same versions, faster than pip. It reads no pip
+# configuration: the local wheel cache that holds the CPU build of torch is passed on from
+# pip's (PIP_FIND_LINKS, or pip.conf). Byte-compiled as pip does: these machines set
+# PYTHONDONTWRITEBYTECODE, so an uncompiled package is compiled at every import.
 FIND_LINKS ?= $(or $(PIP_FIND_LINKS),$(shell $(PYTHON) -m pip config get global.find-links 2>/dev/null))
-UV = $(BIN)/uv pip install --quiet --python $(BIN)/python $(foreach d,$(FIND_LINKS),--find-links $(d))
+UV = $(BIN)/uv pip install --quiet --compile-bytecode --python $(BIN)/python $(foreach d,$(FIND_LINKS),--find-links $(d))
 
 $(BIN)/groundfx: pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
