@@ -236,15 +236,17 @@ def test_a_tilted_start_pose_is_honoured():
 
 def test_the_bare_loop_reference_steps_the_body_it_is_given():
     """`bench sim`'s physics reference (and the physics ping-pong's): the simulator's own body
-    under a bare quadrotor loop, its four thrusts holding the weight, so that the body hovers
-    where it starts, steps after steps, and its clock is PyBullet's."""
+    under a bare quadrotor loop whose four thrusts hold the weight. Set climbing at 0.1 m/s,
+    it climbs on at that speed: PyBullet integrates it, and nothing but the weight and the
+    thrusts acts on it (2000 steps at 1 kHz: 0.2 m)."""
     from simbridge.bare_loop import BareQuadrotor
 
     world = world_with(None, start=(0.0, 0.0, 0.5))
     with Simulation(world, VEHICLE) as sim:
         bare = BareQuadrotor(sim, VEHICLE)
-        assert not sim.held  # released from its stand: PyBullet integrates it
+        pb.resetBaseVelocity(sim._body, [0.0, 0.0, 0.1], [0.0, 0.0, 0.0], sim._cid)
         bare.run(2000)
         pos, _ = pb.getBasePositionAndOrientation(sim._body, physicsClientId=sim._cid)
         vel, _ = pb.getBaseVelocity(sim._body, physicsClientId=sim._cid)
-    assert pos[2] == pytest.approx(0.5, abs=1e-6) and abs(vel[2]) < 1e-6
+    assert pos[2] == pytest.approx(0.7, abs=1e-3) and vel[2] == pytest.approx(0.1, abs=1e-3)
+    assert abs(pos[0]) < 1e-6 and abs(pos[1]) < 1e-6
