@@ -27,18 +27,16 @@ from simbridge.bare_loop import BareQuadrotor
 from simbridge.cpu_latency import CpuLatencyRequest
 from simbridge.hil import HilEncoder, mavlink
 from simbridge.physics import Simulation
-from simbridge.vehicle import load_vehicle
-from simbridge.world import load_world, with_start
+from simbridge.vehicle import Vehicle, load_vehicle
+from simbridge.world import World, load_world, with_start
 
 SAMPLE_STEPS = 250  # one simulated second: every message rate's pattern repeats within it
 LISTENING = "groundfx pingpong: listening on tcp:"
 
 
-def sample_steps(world_name: str, altitude_m: float) -> list[list[Any]]:
-    """Each step's messages (pymavlink objects) of the real encoder, the vehicle hovering at
-    `altitude_m` on its hover rotor speed."""
-    world = with_start(load_world(world_name), (0.0, 0.0, altitude_m))
-    vehicle = load_vehicle(world.vehicle)
+def sample_steps(world: World, vehicle: Vehicle) -> list[list[Any]]:
+    """Each step's messages (pymavlink objects) of the real encoder, the vehicle hovering
+    where `world` starts it, on its hover rotor speed."""
     encoder = HilEncoder(world, vehicle)
     parser = mavlink.MAVLink(None)
     n = vehicle.hover_rotor_speed_rad_s
@@ -87,11 +85,11 @@ def main(argv: list[str] | None = None) -> int:
         help="hold the CPU wake-up latency request while serving, as `groundfx sim` does",
     )
     args = p.parse_args(argv)
-    steps = sample_steps(args.world, args.altitude)
-    if not args.physics:
-        return _serve_client(args, steps, None)
     world = with_start(load_world(args.world), (0.0, 0.0, args.altitude))
     vehicle = load_vehicle(world.vehicle)
+    steps = sample_steps(world, vehicle)
+    if not args.physics:
+        return _serve_client(args, steps, None)
     with Simulation(world, vehicle) as sim:
         bare, substeps = BareQuadrotor(sim, vehicle), world.substeps
         return _serve_client(args, steps, lambda: bare.run(substeps))

@@ -63,11 +63,13 @@ class Problem:
             self.noise_var,
         )
 
-    def scored(self, names: tuple[str, ...], stride: int = STRIDE) -> tuple[Problem, list[slice]]:
+    def scored(
+        self, names: tuple[str, ...], every_row: bool = False
+    ) -> tuple[Problem, list[slice]]:
         """The problem whose `predicted` a fit of `names` scores, and the rows it scores:
-        every `stride`-th row; computed on those rows only when no effect needs the rows
-        between them (HISTORY), the same figures for half the work."""
-        if stride == 1:
+        every row with `every_row`, else every STRIDE-th; computed on those rows only when no
+        effect needs the rows between them (HISTORY), the same figures for half the work."""
+        if every_row:
             return self, [slice(None)] * len(self.flights)
         every = [slice(None, None, STRIDE)] * len(self.flights)
         # a differentiated acceleration's filter needs the rows between too
@@ -258,7 +260,7 @@ def fit(
                     starts.append(x)
         offset += len(part)
 
-    model, model_rows = problem.scored(names, stride)
+    model, model_rows = problem.scored(names, every_row)
 
     def fun(x: np.ndarray) -> np.ndarray:
         pred = model.predicted(_unpack(x * scale, names))
