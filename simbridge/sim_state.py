@@ -5,24 +5,26 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 from simbridge.frames import Mat3, Quat, Vec3, quat_to_matrix
 from simbridge.rotors import Quad
 
+T = TypeVar("T")
 
-class _ComputedOnce:
+
+class _ComputedOnce(Generic[T]):
     """A value computed at its first reading and kept in the instance: functools'
     cached_property without the lock it takes at every first reading (Python 3.11), half
     its cost, for a state made at every step and read by one thread."""
 
-    def __init__(self, compute: Callable[[Any], Any]) -> None:
+    def __init__(self, compute: Callable[[Any], T]) -> None:
         self._compute, self._name = compute, compute.__name__
         self.__doc__ = compute.__doc__
 
-    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+    def __get__(self, obj: Any, owner: type | None = None) -> T:
         if obj is None:
-            return self
+            return self  # type: ignore[return-value]  # the descriptor, read on the class
         value = obj.__dict__[self._name] = self._compute(obj)
         return value
 

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from simbridge.effects.sensor_errors import SensorBiasParams, SensorLatencyParams
-from simbridge.hil import HilEncoder, mavlink
+from simbridge.hil import ARMED_MODE, LOCKSTEP_FLAG, HilEncoder, decode_actuators, mavlink
 from simbridge.physics import with_effects
 from simbridge.sim_state import VehicleState
 from simbridge.vehicle import load_vehicle
@@ -42,6 +42,22 @@ def every_step(world):
     the errors are in test_sensor_noise.py)."""
     rates = SensorRates(gps_hz=250, odometry_hz=250, distance_sensor_hz=250, esc_hz=250)
     return dataclasses.replace(with_ideal_sensors(world), sensors=rates)
+
+
+def test_actuator_values_out_of_range_or_nan_are_clamped_and_counted():
+    """The simulator flies what it can (NaN: off; beyond [0, 1]: the nearer end) and
+    counts each such value, on the channels the vehicle's rotors are wired to."""
+    n_max = VEHICLE.max_rotor_speed_rad_s
+    controls = [9.0] * 16  # channels no rotor is on are not read
+    for ch, value in zip(VEHICLE.actuator_channels, (0.5, math.nan, -0.2, 1.7), strict=True):
+        controls[ch] = value
+    command = decode_actuators(123, controls, ARMED_MODE, LOCKSTEP_FLAG, VEHICLE)
+    assert command.rotor_speeds_rad_s == (0.5 * n_max, 0.0, 0.0, n_max)
+    assert command.clamped == 3
+    assert (command.time_us, command.armed, command.lockstep) == (123, True, True)
+    ok = decode_actuators(7, [0.25] * 16, 0, 0, VEHICLE)
+    assert (ok.clamped, ok.armed, ok.lockstep) == (0, False, False)
+    assert ok.rotor_speeds_rad_s == (0.25 * n_max,) * 4
 
 
 def test_sequence_numbers_count_up_in_the_order_frames_go_on_the_wire():
