@@ -88,7 +88,8 @@ def _next_due(rate: float, step: int) -> float:
 
 
 def _int16(v: float) -> int:
-    return max(-32767, min(32767, round(v)))
+    r = round(v)  # a comparison instead of min and max: six a step
+    return r if -32767 <= r <= 32767 else (32767 if r > 0 else -32767)
 
 
 class ActuatorCommand(NamedTuple):
@@ -172,30 +173,48 @@ class HilEncoder:
         self._position_bias = bias.position_bias_m if bias else zero
         self._mag_enu = ned_to_enu(world.origin.magnetic_field_ned_gauss)
         rates = world.sensors
-        self._per_step = {
-            "gps": world.samples_per_step(rates.gps_hz),
-            "odometry": world.samples_per_step(rates.odometry_hz),
-            "distance": world.samples_per_step(rates.distance_sensor_hz),
-            "esc": world.samples_per_step(rates.esc_hz),
-            "truth": world.samples_per_step(rates.truth_hz),
-        }
-        self._due_step = dict.fromkeys(self._per_step, -1.0)  # -1: found at the first ask
+        # samples a step of each sensor with a clock of its own, in the order of `_schedule`:
+        # odometry, distance (range and flow), esc, gps, truth
+        self._per_step = tuple(
+            world.samples_per_step(hz)
+            for hz in (
+                rates.odometry_hz, rates.distance_sensor_hz, rates.esc_hz, rates.gps_hz,
+                rates.truth_hz,
+            )
+        )  # fmt: skip
+        # each one's next sampling step (-1: found at the first step), none for a sensor that
+        # samples at every step (at least once a step)
+        self._every_step = tuple(rate >= 1.0 for rate in self._per_step)
+        self._due_steps = [math.inf if every else -1.0 for every in self._every_step]
+        self._soonest_due = -1.0
+        self._due_now = (False,) * 5  # `_schedule` at the step being encoded
         # the step of the last range-and-flow sample (the first integrates one nominal period)
-        per_step = self._per_step["distance"]
+        per_step = self._per_step[1]
         self._distance_step = -max(1, round(1.0 / per_step)) if per_step > 0.0 else 0
         self._steps = 0
         self._period_us = world.control_period_us
         self._rest: list[Frame] = []  # the tick's messages after HIL_SENSOR, packed later
 
-    def _due(self, name: str) -> bool:
-        """Whether the sensor's own clock began a period at this step: it samples at its
-        rate on average, not at a rate rounded to a whole number of steps. Asked every step;
-        the next such step is found when the last one has passed (`_next_due`)."""
+    def _schedule(self) -> tuple[bool, bool, bool, bool, bool]:
+        """Which sensors sample at this step (odometry, distance, esc, gps, truth): those
+        whose own clock began a period at it, so that each samples at its rate on average,
+        not at a rate rounded to a whole number of steps. A sensor's next such step is found
+        when its last one has passed (`_next_due`); asked once a step."""
         n = self._steps
-        due = self._due_step[name]
-        if n > due:
-            due = self._due_step[name] = _next_due(self._per_step[name], n)
-        return n == due
+        due = self._due_steps
+        if n > self._soonest_due:
+            for i, rate in enumerate(self._per_step):
+                if n > due[i]:
+                    due[i] = _next_due(rate, n)
+            self._soonest_due = min(due)
+        every = self._every_step
+        return (
+            every[0] or n == due[0],
+            every[1] or n == due[1],
+            every[2] or n == due[2],
+            every[3] or n == due[3],
+            every[4] or n == due[4],
+        )
 
     def encode(
         self, state: VehicleState, time_us: int, ground_effect_n: Vec3 | None = None
@@ -225,10 +244,15 @@ class HilEncoder:
     def _advance(self, state: VehicleState) -> None:
         self._history.append(state)
         hist = self._history
-        self._imu_state = hist[max(0, len(hist) - 1 - self._imu_delay)]
-        self._nav_state = hist[max(0, len(hist) - 1 - self._state_delay)]
-        self._mocap_state = hist[max(0, len(hist) - 1 - self._mocap_delay)]
-        self._truth_due = self._due("truth")
+        n = len(hist)  # each delay line reads its delay back, or the oldest it holds
+        d = self._imu_delay
+        self._imu_state = hist[-1 - d] if n > d else hist[0]
+        d = self._state_delay
+        self._nav_state = hist[-1 - d] if n > d else hist[0]
+        d = self._mocap_delay
+        self._mocap_state = hist[-1 - d] if n > d else hist[0]
+        self._due_now = self._schedule()
+        self._truth_due = self._due_now[4]
 
     def _truth_bytes(self, time_us: int, ge: Vec3 | None) -> bytes:
         nav = self._nav_state
@@ -256,15 +280,16 @@ class HilEncoder:
         nav = self._nav_state
         rest = self._rest
         until_s = self.world.sensors.odometry_until_s
-        if self._due("odometry") and (until_s is None or time_us < until_s * 1e6):
+        odometry, distance, esc, gps, _ = self._due_now
+        if odometry and (until_s is None or time_us < until_s * 1e6):
             rest.append(self._odometry(self._mocap_state, time_us))
-        if self._due("distance"):
+        if distance:
             range_m = self._errors.range_m(nav.range_m)
             rest.append(self._distance(range_m, time_us))
             rest.append(self._flow(nav, range_m, time_us))
-        if self._due("esc"):
+        if esc:
             rest.append(self._esc(self._history[-1]))  # the rotors now: no delay line
-        if self._due("gps"):
+        if gps:
             rest.append(self._gps(nav, time_us))
         # computed last, as it always was (the sensor errors are drawn in this order: a seed
         # gives the same flight), packed and sent first; the others are packed with the truth

@@ -14,7 +14,7 @@ import contextlib
 import os
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from simbridge import transport
@@ -241,24 +241,29 @@ class SimServer:
         c, reader = self.counters, self._reader
         values = reader.lone(data, ACTUATORS.id)
         if values is not None:  # the usual reply: one whole frame, its values in wire order
-            replies = [(values[0], values[2:18], values[18], values[1])]
-        else:
-            replies = []
-            for kind, fields in reader.feed(data):
-                if kind != "HIL_ACTUATOR_CONTROLS":
-                    c.ignored += 1
-                    continue
-                replies.append(
-                    (fields["time_usec"], fields["controls"], fields["mode"], fields["flags"])
-                )
-            c.malformed, c.unknown = reader.malformed, reader.unknown
+            return self._taken(values[0], values[2:18], values[18], values[1], not_before_us)
         latest = None
-        for time_us, controls, mode, flags in replies:
-            command = decode_actuators(time_us, controls, mode, flags, self.vehicle)
-            c.actuator_messages += 1
-            c.clamped += command.clamped
-            if command.time_us < not_before_us:
-                c.stale += 1
-            else:
-                latest = command
+        for kind, fields in reader.feed(data):
+            if kind != "HIL_ACTUATOR_CONTROLS":
+                c.ignored += 1
+                continue
+            command = self._taken(
+                fields["time_usec"], fields["controls"], fields["mode"], fields["flags"],
+                not_before_us,
+            )  # fmt: skip
+            latest = command or latest
+        c.malformed, c.unknown = reader.malformed, reader.unknown
         return latest
+
+    def _taken(
+        self, time_us: int, controls: Sequence[float], mode: int, flags: int, not_before_us: int
+    ) -> ActuatorCommand | None:
+        """One reply decoded and counted; None if it answers a step before `not_before_us`."""
+        c = self.counters
+        command = decode_actuators(time_us, controls, mode, flags, self.vehicle)
+        c.actuator_messages += 1
+        c.clamped += command.clamped
+        if command.time_us < not_before_us:
+            c.stale += 1
+            return None
+        return command
