@@ -103,11 +103,14 @@ def process_cpu_s(pid: int) -> float | None:
 
 def _lockstep(sock: Any, steps: int, command: Any, server_pid: int) -> dict[str, float]:
     """Run the loop; its wall time and the CPU time each end spent in it (per step, us):
-    the loop runs at the pace of the busier end."""
+    the loop runs at the pace of the busier end. Timed from the first tick answered: our
+    simulator listens before it builds its world (a flight's two processes start side by
+    side), and the ping-pong after; the loop's figure is the loop's, not a set-up's."""
     try:
+        view = run_lockstep(sock, 1, command)
         server0, client0 = process_cpu_s(server_pid), time.process_time()
         t0 = time.perf_counter()
-        run_lockstep(sock, steps, command)
+        run_lockstep(sock, steps, command, view)
         wall = time.perf_counter() - t0
         client1, server1 = time.process_time(), process_cpu_s(server_pid)
         end_lockstep(sock)
@@ -183,7 +186,8 @@ def pingpong_rtf(
     period_s = world.control_period_s
     steps = max(1, round(seconds / period_s))
     cmd = [sys.executable, "-m", "simbridge.pingpong", "--world", world_path]
-    cmd += ["--altitude", str(BENCH_ALTITUDE_M), "--steps", str(steps)]
+    # one step more than timed: the first is answered before the clocks start (`_lockstep`)
+    cmd += ["--altitude", str(BENCH_ALTITUDE_M), "--steps", str(steps + 1)]
     cmd += ["--physics"] if physics else []
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None

@@ -20,9 +20,11 @@ Policy = Callable[[int, "ClientView"], tuple[float, float, float, float]]
 
 @dataclass
 class ClientView:
-    """The latest messages of each kind the client has seen."""
+    """The latest messages of each kind the client has seen, and its parser (with what it
+    holds of a frame cut short): a loop run in parts with one view reads every frame."""
 
     latest: dict[str, object] = field(default_factory=dict)
+    parser: mavlink.MAVLink = field(default_factory=lambda: mavlink.MAVLink(None))
 
 
 def connect(host: str, port: int, timeout_s: float = 10.0) -> socket.socket:
@@ -47,7 +49,7 @@ def run_lockstep(
 ) -> ClientView:
     """Answer `steps` HIL_SENSOR messages, then return (the caller closes the socket)."""
     view = view or ClientView()
-    parser = mavlink.MAVLink(None)
+    parser = view.parser
     mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     controls = [0.0] * 16
     answered = 0
