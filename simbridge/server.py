@@ -251,7 +251,8 @@ class SimServer:
                 fields["time_usec"], fields["controls"], fields["mode"], fields["flags"],
                 not_before_us,
             )  # fmt: skip
-            latest = command or latest
+            if command is not None:  # the latest reply that is not stale
+                latest = command
         c.malformed, c.unknown = reader.malformed, reader.unknown
         return latest
 
