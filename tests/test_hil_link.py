@@ -167,6 +167,36 @@ def test_garbage_unknown_messages_and_bad_actuators_are_counted_and_survived(sim
     assert clamped == 3 * bad_steps  # NaN, 1.5 and -0.2 on each bad step
 
 
+def test_a_stale_reply_is_dropped_and_the_current_one_awaited(sim_process):
+    """A reply to an earlier step (one that arrived late) does not answer the current one:
+    the simulator steps once, on the reply to the step it sent, whatever came before it."""
+    proc, port = sim_process(lockstep_start=True, extra=["--timeout", "0.5"])
+    conn = connect(port)
+    seen: dict[str, int] = {}
+    mav = mavlink.MAVLink(None, 1, 1)
+
+    def reply(time_usec: int) -> bytes:
+        controls = [HOVER_FRACTION] * 4 + [0.0] * 12
+        message = mavlink.MAVLink_hil_actuator_controls_message(time_usec, controls, 128, 1)
+        return message.pack(mav)
+
+    sensor = next_of(conn, {"HIL_SENSOR"}, seen)
+    answer(conn, sensor)
+    times = [sensor.time_usec]
+    for _ in range(20):  # a late reply to the step before, then this step's, in one write
+        sensor = next_of(conn, {"HIL_SENSOR"}, seen)
+        conn.write(reply(times[-1]) + reply(sensor.time_usec))
+        times.append(sensor.time_usec)
+    sensor = next_of(conn, {"HIL_SENSOR"}, seen)
+    conn.write(reply(times[-1]))  # a late reply alone: the step is still unanswered
+    last = finish(proc, timeout_s=10)
+    assert {b - a for a, b in pairwise(times)} == {4000}  # never two steps on one tick
+    assert sensor.time_usec == times[-1] + 4000
+    assert proc.returncode == 1
+    assert "no HIL_ACTUATOR_CONTROLS for 0.5 s; 21 steps" in last, last
+    conn.close()
+
+
 def test_a_silent_autopilot_ends_lockstep_after_the_timeout(sim_process):
     proc, port = sim_process(extra=["--timeout", "0.5"])
     conn = connect(port)
