@@ -24,7 +24,7 @@ from mission.fly import fly
 BENCH_MISSION = EXAMPLES_DIR / "low_hover.yaml"
 
 
-def bench_online(method: str = "naive", repeat: int = 3, world: str = "default") -> dict[str, Any]:
+def bench_online(method: str = "naive", repeat: int = 5, world: str = "default") -> dict[str, Any]:
     runs: dict[str, list[dict[str, Any]]] = {"off": [], "on": []}
     network = "grounds" if method in NEEDS_BASIS else "rho1"
     for _ in range(repeat):

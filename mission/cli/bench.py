@@ -34,7 +34,7 @@ def add_parser(sub: Any) -> None:
     b.add_argument(
         "--method", default="naive", choices=METHODS, help="online method (default: naive)"
     )
-    b.add_argument("--repeat", type=int, default=3, help="off/on pairs (default: 3)")
+    b.add_argument("--repeat", type=int, default=5, help="off/on pairs (default: 5)")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench)
     b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")
