@@ -170,7 +170,7 @@ def test_garbage_unknown_messages_and_bad_actuators_are_counted_and_survived(sim
 def test_a_stale_reply_is_dropped_and_the_current_one_awaited(sim_process):
     """A reply to an earlier step (one that arrived late) does not answer the current one:
     the simulator steps once, on the reply to the step it sent, whatever came before it."""
-    proc, port = sim_process(lockstep_start=True, extra=["--timeout", "0.5"])
+    proc, port = sim_process(lockstep_start=True, extra=["--timeout", "1"])
     conn = connect(port)
     seen: dict[str, int] = {}
     mav = mavlink.MAVLink(None, 1, 1)
@@ -193,7 +193,7 @@ def test_a_stale_reply_is_dropped_and_the_current_one_awaited(sim_process):
     assert {b - a for a, b in pairwise(times)} == {4000}  # never two steps on one tick
     assert sensor.time_usec == times[-1] + 4000
     assert proc.returncode == 1
-    assert "no HIL_ACTUATOR_CONTROLS for 0.5 s; 21 steps" in last, last
+    assert "no HIL_ACTUATOR_CONTROLS for 1 s; 21 steps" in last, last
     conn.close()
 
 
