@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from simbridge import transport
-from simbridge.hil import ARMED_MODE, LOCKSTEP_FLAG, mavlink
+from simbridge.actuator_controls import ARMED_MODE, LOCKSTEP_FLAG
+from simbridge.hil import mavlink
 from simbridge.wire import FrameReader, PacketSequence, WirePacker
 
 AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID = 1, 1

@@ -13,7 +13,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from simbridge.hil import ARMED_MODE, LOCKSTEP_FLAG, mavlink
+from simbridge.actuator_controls import ARMED_MODE, LOCKSTEP_FLAG
+from simbridge.hil import mavlink
 
 Policy = Callable[[int, "ClientView"], tuple[float, float, float, float]]
 

@@ -1,14 +1,15 @@
-"""The PX4 simulator protocol's messages: the vehicle state in, MAVLink bytes out, and back.
+"""The PX4 simulator protocol's messages: the vehicle state in, MAVLink bytes out.
 
 Simulator -> autopilot, per control step: HIL_STATE_QUATERNION and HIL_SENSOR; ODOMETRY (a
 motion-capture pose, float precision), DISTANCE_SENSOR (downward range, whole cm) with
 HIL_OPTICAL_FLOW (a flow deck: flow and the same range in float metres) and
 ESC_TELEMETRY_1_TO_4 (actual rotor speeds, so motor lag is observable) at their world-file
 rates; HIL_GPS at 10 Hz; HIL_SENSOR, the tick, first and alone in its send. Autopilot ->
-simulator: HIL_ACTUATOR_CONTROLS. With the true ground effect (DEBUG_VECT GE_TRUE) go the true
-position in floats (LOCAL_POSITION_NED) and the true height above the surface below
-(ALTITUDE's bottom_clearance), all for evaluation only. Units and frames (NED,
-FRD, degE7, mm, cm/s, mG, gauss, hPa) exist only here and in `frames`.
+simulator, HIL_ACTUATOR_CONTROLS, is decoded in `actuator_controls`. With the true ground
+effect (DEBUG_VECT GE_TRUE) go the true position in floats (LOCAL_POSITION_NED) and the true
+height above the surface below (ALTITUDE's bottom_clearance), all for evaluation only.
+Units and frames (NED, FRD, degE7, mm, cm/s, mG, gauss, hPa) exist only here and in
+`frames`.
 """
 
 from __future__ import annotations
@@ -17,7 +18,6 @@ import math
 import os
 from collections import deque
 from collections.abc import Sequence
-from typing import NamedTuple
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -43,8 +43,6 @@ SIM_COMPONENT_ID = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 # HIL_SENSOR.fields_updated: accelerometer, gyro, magnetometer, barometer (MAVLINK.md).
 FIELDS_UPDATED = 0x7 | 0x38 | 0x1C0 | 0x1A00
 Frame = tuple[WirePacker, tuple]  # a message's packer and its fields, packed later
-LOCKSTEP_FLAG = 1  # HIL_ACTUATOR_CONTROLS.flags bit 0
-ARMED_MODE = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 UNKNOWN_COVARIANCE = [math.nan] + [0.0] * 20
 RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
 TRUTH_NAME = b"GE_TRUE"  # DEBUG_VECT carrying the true ground-effect force
@@ -90,42 +88,6 @@ def _next_due(rate: float, step: int) -> float:
 def _int16(v: float) -> int:
     r = round(v)  # a comparison instead of min and max: six a step
     return r if -32767 <= r <= 32767 else (32767 if r > 0 else -32767)
-
-
-class ActuatorCommand(NamedTuple):
-    """One HIL_ACTUATOR_CONTROLS decoded: rotor speed commands and the flags that matter (a
-    named tuple: one is made at every lockstep step)."""
-
-    time_us: int  # the sensor time it answers (PX4 stamps it with its lockstep clock)
-    rotor_speeds_rad_s: tuple[float, float, float, float]
-    armed: bool
-    lockstep: bool
-    clamped: int  # values that were NaN or outside [0, 1]
-
-
-def _clamped(c: float) -> float:
-    return 0.0 if math.isnan(c) else min(max(c, 0.0), 1.0)
-
-
-def decode_actuators(
-    time_us: int, controls: Sequence[float], mode: int, flags: int, vehicle: Vehicle
-) -> ActuatorCommand:
-    """controls[ch] in [0, 1] is n / n_max of the rotor on channel ch; bad values are clamped."""
-    ch0, ch1, ch2, ch3 = vehicle.actuator_channels
-    c0, c1, c2, c3 = controls[ch0], controls[ch1], controls[ch2], controls[ch3]
-    clamped = 0
-    # written out: decoded at every lockstep step; `not 0 <= c <= 1` is also true for NaN
-    if not (0.0 <= c0 <= 1.0 and 0.0 <= c1 <= 1.0 and 0.0 <= c2 <= 1.0 and 0.0 <= c3 <= 1.0):
-        clamped = sum(not 0.0 <= c <= 1.0 for c in (c0, c1, c2, c3))
-        c0, c1, c2, c3 = _clamped(c0), _clamped(c1), _clamped(c2), _clamped(c3)
-    n = vehicle.max_rotor_speed_rad_s
-    return ActuatorCommand(
-        time_us,
-        (c0 * n, c1 * n, c2 * n, c3 * n),
-        bool(mode & ARMED_MODE),
-        bool(flags & LOCKSTEP_FLAG),
-        clamped,
-    )
 
 
 class HilEncoder:

@@ -18,8 +18,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from simbridge import transport
+from simbridge.actuator_controls import ActuatorCommand, decode_actuators
 from simbridge.cpu_latency import CpuLatencyRequest
-from simbridge.hil import ActuatorCommand, HilEncoder, decode_actuators, mavlink
+from simbridge.hil import HilEncoder, mavlink
 from simbridge.physics import Simulation
 from simbridge.vehicle import Vehicle
 from simbridge.wire import FrameReader

@@ -7,8 +7,9 @@ import math
 
 import pytest
 
+from simbridge.actuator_controls import ARMED_MODE, LOCKSTEP_FLAG, decode_actuators
 from simbridge.effects.sensor_errors import SensorBiasParams, SensorLatencyParams
-from simbridge.hil import ARMED_MODE, LOCKSTEP_FLAG, HilEncoder, decode_actuators, mavlink
+from simbridge.hil import HilEncoder, mavlink
 from simbridge.physics import with_effects
 from simbridge.sim_state import VehicleState
 from simbridge.vehicle import load_vehicle
