@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from autopilot.controller import FlightState
-from autopilot.navigation import Navigation
+from autopilot.estimation.navigation import Navigation
+from autopilot.types import FlightState
 
 
 def estimation_error(estimate: FlightState, truth: FlightState) -> tuple[float, ...]:

@@ -19,34 +19,15 @@ from typing import Any
 
 import yaml
 
-from autopilot.commander import CommanderParams
-from autopilot.controller import ControllerParams
-from autopilot.estimator_params import EstimatorParams
-from autopilot.firmware_defaults import identity_defaults
-from autopilot.ground_models import MODEL_NAMES
-from autopilot.land_detector import LandDetectorParams
-from autopilot.mission_items import Geofence
+from autopilot.commander.commander import CommanderParams
+from autopilot.commander.failsafes import ACTION_NAMES, FailsafeParams
+from autopilot.commander.mission_items import Geofence
+from autopilot.control.controller import ControllerParams
+from autopilot.control.ground_models import MODEL_NAMES
+from autopilot.control.land_detector import LandDetectorParams
+from autopilot.estimation.estimator_params import EstimatorParams
+from autopilot.identity import identity_defaults
 from simbridge.config import ConfigError, param
-
-# failsafe actions, PX4's numbering for NAV_DLL_ACT and GF_ACTION
-ACTION_NONE, ACTION_WARN, ACTION_HOLD, ACTION_RETURN, ACTION_LAND = 0, 1, 2, 3, 5
-ACTION_NAMES = {0: "none", 1: "warn", 2: "hold", 3: "return", 5: "land"}
-
-
-@dataclass(frozen=True)
-class FailsafeParams:
-    gcs_loss_action: int = param(
-        ACTION_NONE,
-        lo=0,
-        hi=5,
-        doc="ground station lost in flight: 0 none, 2 hold, 3 return, 5 land",
-    )
-    gcs_loss_timeout_s: float = param(
-        5.0, unit="s", lo=0.5, hi=300.0, doc="no ground-station heartbeat this long (wall clock)"
-    )
-    fence_action: int = param(
-        ACTION_RETURN, lo=0, hi=5, doc="geofence breached: 0 none, 1 warn, 2 hold, 3 return, 5 land"
-    )
 
 
 @dataclass(frozen=True)
@@ -237,7 +218,7 @@ def check_value(name: str, value: float) -> str | None:
 
 class ParamStore:
     """Current values; `path` (YAML, name: value) keeps the ones set across restarts. The
-    defaults follow the firmware `identity` claims to be (autopilot/firmware_defaults.py)."""
+    defaults follow the firmware `identity` claims to be (autopilot/identity.py)."""
 
     def __init__(
         self,

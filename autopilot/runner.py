@@ -18,32 +18,33 @@ from typing import Any
 
 import numpy as np
 
-from autopilot import requests
-from autopilot.commander import CommanderState, Phase, command
-from autopilot.controller import FlightState, control, handover, integrate
-from autopilot.gcs_link import GcsLink
-from autopilot.ground_models import (
+from autopilot.commander import requests
+from autopilot.commander.commander import CommanderState, Phase, command
+from autopilot.commander.mission_items import MissionItem
+from autopilot.commander.modes import FlightMode
+from autopilot.control.controller import control, handover, integrate
+from autopilot.control.ground_models import (
     GroundEffectInputs,
     GroundEffectModel,
     NeuralGroundEffect,
     fixed_point_step,
     make_model,
 )
-from autopilot.ground_station import GroundStation, StepInput
-from autopilot.land_detector import LandDetector, ground_contact
-from autopilot.learning_sample import learning_sample
+from autopilot.control.land_detector import LandDetector, ground_contact
+from autopilot.estimation.navigation import Navigation
+from autopilot.gcs.ground_station import GroundStation, StepInput
+from autopilot.gcs.link import GcsLink
+from autopilot.gcs.signing import Signing
 from autopilot.metrics import COLUMNS, flight_metrics, ge_error_metrics, trajectory_sha256
-from autopilot.mission_items import MissionItem
-from autopilot.modes import FlightMode
 from autopilot.nav_metrics import estimation_error, estimator_metrics
-from autopilot.navigation import Navigation
-from autopilot.online_control import OnlineControl, OnlineOptions, vertical_tracking_error
+from autopilot.online.learning_sample import learning_sample
+from autopilot.online.online_control import OnlineControl, OnlineOptions, vertical_tracking_error
 from autopilot.params import ParamStore
-from autopilot.record_options import RecordOptions
-from autopilot.recorder import open_recorder
-from autopilot.signing import Signing
-from autopilot.simlink import LinkLost, SimLink, Step
+from autopilot.recording.record_options import RecordOptions
+from autopilot.recording.recorder import open_recorder
+from autopilot.simlink import LinkLost, SimLink
 from autopilot.truth import true_height_m, true_state
+from autopilot.types import FlightState, Step
 from simbridge.rotors import Quad
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 

@@ -16,9 +16,9 @@ stale. In lockstep there is never more than one tick waiting.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
+from autopilot.types import Step
 from simbridge import transport
 from simbridge.actuator_controls import ARMED_MODE, LOCKSTEP_FLAG
 from simbridge.hil import mavlink
@@ -34,15 +34,6 @@ class LinkLost(Exception):
 def parse_url(url: str) -> None:
     """Refuses a `--sim` URL that is neither `tcp:HOST:PORT` nor `unix:PATH` (ValueError)."""
     transport.parse_url(url)
-
-
-@dataclass
-class Step:
-    """The latest message of each kind, as fields, when a HIL_SENSOR closed the step."""
-
-    sensor: dict[str, Any]
-    latest: dict[str, dict[str, Any]] = field(default_factory=dict)
-    new: set[str] = field(default_factory=set)  # kinds that arrived during this step
 
 
 class SimLink:

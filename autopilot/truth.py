@@ -3,8 +3,7 @@ nothing in the control path reads it (the autopilot flies on its estimator)."""
 
 from __future__ import annotations
 
-from autopilot.controller import FlightState
-from autopilot.simlink import Step
+from autopilot.types import FlightState, Step
 from simbridge.frames import frd_to_flu, geodetic_to_local, ned_to_enu, quat_ned_frd_to_enu_flu
 
 

@@ -11,7 +11,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from autopilot.mission_items import Home
+from autopilot.commander.mission_items import Home
 from mission.gcs_client import GroundStation, GroundStationError, VehicleEnded
 from mission.plans.formats import load_mission_file
 from mission.recordings import default_recording_path

@@ -18,8 +18,8 @@ from typing import Any
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil
 
-from autopilot.mission_items import MissionItem
-from autopilot.mission_protocol import item_from_message, item_message
+from autopilot.commander.mission_items import MissionItem
+from autopilot.gcs.mission_protocol import item_from_message, item_message
 
 mav = mavutil.mavlink
 GCS_SYSID, GCS_COMPID = 255, 190

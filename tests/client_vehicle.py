@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from autopilot.mission_items import Home
+from autopilot.commander.mission_items import Home
 from mission.plans.formats import load_mission_file
 from simbridge.frames import geodetic_to_local
 from simbridge.launch import start_sim

@@ -5,10 +5,16 @@ from __future__ import annotations
 
 import pytest
 
-from autopilot import requests
-from autopilot.commander import CommanderParams, CommanderState, Phase, command, limited_setpoint
-from autopilot.mission_items import PlanStep
-from autopilot.modes import FlightMode, custom_mode, decode_mode
+from autopilot.commander import requests
+from autopilot.commander.commander import (
+    CommanderParams,
+    CommanderState,
+    Phase,
+    command,
+    limited_setpoint,
+)
+from autopilot.commander.mission_items import PlanStep
+from autopilot.commander.modes import FlightMode, custom_mode, decode_mode
 
 REST = 0.0126
 PARAMS = CommanderParams(spin_up_s=0.2, takeoff_altitude_m=1.0, cruise_speed_m_s=0.5)

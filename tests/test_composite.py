@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from autopilot.online_learner import OnlineLearner
+from autopilot.online.online_learner import OnlineLearner
 from learner.model import GroundEffectNet, load_model
 from learner.online.composite import Z, grounds_from_header
 from learner.online.memory import load_memory

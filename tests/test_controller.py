@@ -6,21 +6,20 @@ import math
 
 import pytest
 
-from autopilot.controller import (
+from autopilot.control.controller import (
     ControllerParams,
-    FlightState,
-    Setpoint,
     control,
     handover,
     integrate,
     jerk_limited,
 )
-from autopilot.ground_models import (
+from autopilot.control.ground_models import (
     AnalyticGroundEffect,
     GroundEffectInputs,
     fixed_point_step,
     make_model,
 )
+from autopilot.types import FlightState, Setpoint
 from simbridge.config import ConfigError
 from simbridge.effects.ground import ground_effect_force_n
 from simbridge.frames import quat_from_euler

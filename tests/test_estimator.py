@@ -9,16 +9,16 @@ import math
 import numpy as np
 import pytest
 
-from autopilot import estimator as ekf
-from autopilot.attitude import (
+from autopilot.commander.commander import CommanderParams, CommanderState, Phase, command
+from autopilot.commander.modes import FlightMode
+from autopilot.control.land_detector import LandDetector, LandDetectorParams, ground_contact
+from autopilot.estimation import estimator as ekf
+from autopilot.estimation.attitude import (
     attitude_from_gravity_and_field,
     quat_mul,
     rotation,
     rotation_vector_quat,
 )
-from autopilot.commander import CommanderParams, CommanderState, Phase, command
-from autopilot.land_detector import LandDetector, LandDetectorParams, ground_contact
-from autopilot.modes import FlightMode
 from simbridge.sensor_noise import SensorErrors, SensorNoise
 from simbridge.vehicle import GRAVITY_M_S2
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from autopilot.controller import THESIS_GAINS
+from autopilot.control.controller import THESIS_GAINS
 from mission.fly import fly
 from tests.helpers import REPO
 
@@ -20,7 +20,7 @@ RHO2 = [{"name": "ground_effect", "rho": 2.0}]
 
 
 def sensors(name: str) -> list[str]:
-    from autopilot.estimator_params import SENSOR_SETS
+    from autopilot.estimation.estimator_params import SENSOR_SETS
 
     return [a for k, v in SENSOR_SETS[name].items() for a in ("--param", f"{k}={v}")]
 

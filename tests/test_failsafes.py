@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
-from autopilot import requests
-from autopilot.commander import CommanderParams, CommanderState, Phase
-from autopilot.failsafes import Failsafes, check_failsafes
-from autopilot.mission_items import Geofence
-from autopilot.modes import FlightMode
-from autopilot.params import ACTION_NONE, ACTION_RETURN, FailsafeParams
+from autopilot.commander import requests
+from autopilot.commander.commander import CommanderParams, CommanderState, Phase
+from autopilot.commander.failsafes import (
+    ACTION_NONE,
+    ACTION_RETURN,
+    FailsafeParams,
+    Failsafes,
+    check_failsafes,
+)
+from autopilot.commander.mission_items import Geofence
+from autopilot.commander.modes import FlightMode
 
 HOME = (0.0, 0.0, 0.0126)
 

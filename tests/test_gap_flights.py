@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from autopilot.commander import CommanderParams
+from autopilot.commander.commander import CommanderParams
 from autopilot.params import NAMES
 from mission.campaigns.gap_bench import _drop_stale_flights
 from mission.campaigns.gap_flights import (

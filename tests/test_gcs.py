@@ -22,8 +22,8 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from autopilot.mission_items import NAV_WAYPOINT, Home, item_at
-from autopilot.mission_protocol import item_from_message, item_message
+from autopilot.commander.mission_items import NAV_WAYPOINT, Home, item_at
+from autopilot.gcs.mission_protocol import item_from_message, item_message
 from mission.fly import gcs_autopilot_command
 from mission.gcs_client import GroundStation, GroundStationError
 from mission.plans.formats import load_mission_file

@@ -11,11 +11,18 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from autopilot import guided, requests
-from autopilot.commander import CommanderParams, CommanderState, Phase, command
-from autopilot.mission_items import NAV_WAYPOINT, Geofence, Home, MissionItem, is_home_row, item_at
-from autopilot.modes import FlightMode
-from autopilot.offboard import Refused, follow, global_target, local_target
+from autopilot.commander import guided, requests
+from autopilot.commander.commander import CommanderParams, CommanderState, Phase, command
+from autopilot.commander.mission_items import (
+    NAV_WAYPOINT,
+    Geofence,
+    Home,
+    MissionItem,
+    is_home_row,
+    item_at,
+)
+from autopilot.commander.modes import FlightMode
+from autopilot.commander.offboard import Refused, follow, global_target, local_target
 from autopilot.params import ParamStore
 
 REST = 0.0126

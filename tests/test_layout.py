@@ -64,3 +64,32 @@ def test_no_modules_import_each_other_in_a_circle() -> None:
 
 def _is_parent(package: str, module: str) -> bool:
     return module.startswith(package + ".")
+
+
+# The autopilot's rooms, lowest first: a room imports only from its own and lower levels.
+AUTOPILOT_LEVELS = (
+    {"types", "identity", "metrics"},  # what every room passes around; pure figures
+    {"simlink", "estimation", "control"},  # the simulator link; state estimation; control laws
+    {"commander"},  # phases, modes, requests, failsafes, mission items
+    {"params"},  # the parameters of every room, tuned over MAVLink
+    {"gcs", "recording", "online", "nav_metrics", "truth"},  # the loop's companions
+    {"runner"},  # thin wiring: link -> estimate -> command -> control -> send
+)
+
+
+def _room(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if parts[0] == "autopilot" and len(parts) > 1 else None
+
+
+def test_autopilot_rooms_import_down_their_levels() -> None:
+    level = {room: i for i, rooms in enumerate(AUTOPILOT_LEVELS) for room in rooms}
+    found = {_room(m) for m in _modules()} - {None}
+    assert found <= set(level), f"rooms without a level: {sorted(found - set(level))}"
+    upward = [
+        f"{m} imports {d}"
+        for m, deps in _modules().items()
+        for d in deps
+        if _room(m) and _room(d) and level[_room(d)] > level[_room(m)]
+    ]
+    assert upward == []

@@ -17,7 +17,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from autopilot.mission_items import DO_CHANGE_SPEED, NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT
+from autopilot.commander.mission_items import DO_CHANGE_SPEED, NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT
 from simbridge.frames import geodetic_to_local, local_to_geodetic
 from tests.client_vehicle import (
     FLIGHT_WALL_S,

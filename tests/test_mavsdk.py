@@ -21,7 +21,7 @@ from mavsdk.asyncio.plugins.offboard import OffboardAsync
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import LandedState, TelemetryAsync
 
-from autopilot.mission_items import DO_CHANGE_SPEED, NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT
+from autopilot.commander.mission_items import DO_CHANGE_SPEED, NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT
 from tests.client_vehicle import (
     EXAMPLES,
     FLIGHT_WALL_S,

@@ -16,7 +16,7 @@ from mavsdk.asyncio.plugins.mission import MissionItem, MissionPlan
 from mavsdk.asyncio.plugins.offboard import VelocityNedYaw
 from mavsdk.asyncio.plugins.telemetry import FlightMode
 
-from autopilot.mission_items import Home
+from autopilot.commander.mission_items import Home
 from simbridge.frames import geodetic_to_local, local_to_geodetic
 from tests.client_vehicle import (
     FLIGHT_WALL_S,

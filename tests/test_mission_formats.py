@@ -13,7 +13,7 @@ import pytest
 import yaml
 from pymavlink import mavwp
 
-from autopilot.mission_items import (
+from autopilot.commander.mission_items import (
     DO_CHANGE_SPEED,
     NAV_LAND,
     NAV_RETURN_TO_LAUNCH,

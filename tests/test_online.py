@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from autopilot.online_learner import OnlineLearner
+from autopilot.online.online_learner import OnlineLearner
 from autopilot.params import ParamStore, check_value
 from learner.model import load_model
 from learner.network import CONTROL_COLUMNS
@@ -199,7 +199,7 @@ def test_the_learner_process_resets_in_order_and_a_second_flight_holds_on_to_the
     """Asynchronous reset lands between the samples before and after it; the saved model
     keeps the offline weights beside it, and a session started from it anchors on those (the
     protecting methods protect what was learnt offline, not what the last flight left)."""
-    from autopilot.online_control import find_offline
+    from autopilot.online.online_control import find_offline
 
     x, y = shifted_batch(1000, seed=4)
     learner = OnlineLearner(BASE, OnlineSettings(), MEMORY, deterministic=False, queue_size=1000)

@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from autopilot.flight_recorder import FlightRecorder
-from autopilot.mission_items import Home, plan_steps
-from autopilot.record_options import RecordOptions
+from autopilot.commander.mission_items import Home, plan_steps
+from autopilot.recording.flight_recorder import FlightRecorder
+from autopilot.recording.record_options import RecordOptions
+from autopilot.recording.scene import LABEL_LIFT_M
 from autopilot.runner import MODES
-from autopilot.scene import LABEL_LIFT_M
 from learner.flightlogs.blueprint_reader import read_views
 from learner.flightlogs.recording import (
     ENTITY_PATHS,
@@ -203,8 +203,7 @@ def test_a_killed_autopilot_leaves_a_recording_up_to_shortly_before_the_kill(tmp
 
 
 def test_the_recorder_takes_learner_reports_and_events_from_the_loop(tmp_path):
-    from autopilot.controller import FlightState, Setpoint
-    from autopilot.simlink import Step
+    from autopilot.types import FlightState, Setpoint, Step
 
     home = Home(59.0, 18.0, 0.0)
     plan = plan_steps(load_mission_file(EXAMPLES / "square.yaml", home).items, home, 0.0)
@@ -313,7 +312,7 @@ def test_review_web_serves_the_viewer_on_a_headless_machine(flown):
 
 
 def test_the_trail_is_drawn_in_segments_that_join_up():
-    from autopilot.trail import Trail
+    from autopilot.recording.trail import Trail
 
     trail = Trail(spacing_m=0.01, period_s=0.25, segment_s=10.0)
     t = np.arange(0, 25.0, 0.004)

@@ -1,11 +1,11 @@
 """The flight recording: its layout (entity paths, series, units) and its reader.
 
-Every flight writes one rerun recording (`autopilot.recorder`); this module is the one place
-that knows what is in it, for the writer, the default blueprint, the tests and any later
-analysis. `read_recording(path)` loads a `.rrd` file into numpy arrays with `rerun.chunk`
-(rerun 0.41 has no `rr.dataframe`; its dataframe reader needs `datafusion`, which we do not
-need for this). A recording cut short by a crash has no footer and may end in half a message:
-it is still read, up to its last whole message, and says so (`complete` is False).
+Every flight writes one rerun recording (`autopilot.recording.recorder`); this module is the one
+place that knows what is in it, for the writer, the default blueprint, the tests and any later
+analysis. `read_recording(path)` loads a `.rrd` file into numpy arrays with `rerun.chunk` (rerun
+0.41 has no `rr.dataframe`; its dataframe reader needs `datafusion`, which we do not need for this).
+A recording cut short by a crash has no footer and may end in half a message: it is still read, up
+to its last whole message, and says so (`complete` is False).
 
 Frames and units as everywhere in groundfx: world x east, y north, z up, metres, seconds,
 newtons, rad/s. Time is the `sim_time` timeline: the simulator's `time_usec`.

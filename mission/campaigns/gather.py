@@ -10,7 +10,7 @@ from pathlib import Path
 import yaml
 from tqdm import tqdm
 
-from autopilot.mission_items import Home, waypoint_items
+from autopilot.commander.mission_items import Home, waypoint_items
 from autopilot.params import MODEL_NAMES, ParamStore
 from autopilot.runner import AutopilotConfig, fly_mission
 from learner.dataset import save_dataset

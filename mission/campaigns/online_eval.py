@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from autopilot.controller import THESIS_GAINS
+from autopilot.control.controller import THESIS_GAINS
 from autopilot.metrics import FAR_FROM_GROUND_M, NEAR_GROUND_M
 from learner.flightlogs.readers import read_log
 from learner.model import load_model

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import random
 
-from autopilot.mission_items import Waypoint
+from autopilot.commander.mission_items import Waypoint
 
 MIN_ALTITUDE_M = 0.018  # the vehicle rests with its centre at 0.0126 m
 

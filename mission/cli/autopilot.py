@@ -77,7 +77,7 @@ def _param_overrides(args: argparse.Namespace) -> dict[str, float]:
             raise ConfigError(f"--param {text!r}: expected NAME=NUMBER")
     model = getattr(args, "model", None)
     if model is not None:
-        from autopilot.ground_models import MODEL_NAMES
+        from autopilot.control.ground_models import MODEL_NAMES
 
         out["GFX_GE_MODEL"] = float(MODEL_NAMES.index(model))
     if getattr(args, "rho", None) is not None:
@@ -90,7 +90,7 @@ def _param_overrides(args: argparse.Namespace) -> dict[str, float]:
 def _flight_log_writer(args: argparse.Namespace) -> Any:
     if args.flight_log is None:
         return None
-    from autopilot.flight_log import FlightLogWriter
+    from autopilot.recording.flight_log import FlightLogWriter
 
     mission = str(args.mission.resolve()) if args.mission else None
     return FlightLogWriter(args.flight_log, {"mission": mission, "vehicle": args.vehicle})
@@ -116,13 +116,13 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from autopilot.ground_models import default_network
+    from autopilot.commander.mission_items import Home
+    from autopilot.control.ground_models import default_network
+    from autopilot.gcs.signing import Signing
     from autopilot.metrics import COLUMNS
-    from autopilot.mission_items import Home
     from autopilot.params import ParamStore
-    from autopilot.record_options import RecordOptions
+    from autopilot.recording.record_options import RecordOptions
     from autopilot.runner import AutopilotConfig, fly_mission
-    from autopilot.signing import Signing
     from autopilot.simlink import LinkLost, parse_url
     from mission.cli.online import online_options
     from mission.plans.formats import load_mission_file

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from autopilot.mission_items import Home, MissionItem
+    from autopilot.commander.mission_items import Home, MissionItem
     from mission.plans.doc import MissionDoc
 
 # The model and the formats are imported when a mission command runs: they bring pymavlink
@@ -81,7 +81,7 @@ def add_mission_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def describe(item: MissionItem, home: Home) -> str:
     """One item in words, positions in metres from home (x east, y north, z up)."""
-    from autopilot.mission_items import (
+    from autopilot.commander.mission_items import (
         DO_CHANGE_SPEED,
         NAV_LAND,
         NAV_RETURN_TO_LAUNCH,
@@ -125,7 +125,7 @@ def summary(path: Path, doc: MissionDoc) -> list[str]:
 
 
 def cmd_mission(args: argparse.Namespace) -> int:
-    from autopilot.mission_items import Geofence, Home
+    from autopilot.commander.mission_items import Geofence, Home
     from mission.plans.formats import FORMAT_NAMES, SUFFIXES, load_mission_file, save_mission_file
 
     fence = Geofence(max_altitude_m=args.max_altitude, max_radius_m=args.max_radius)

@@ -59,7 +59,7 @@ def online_overrides(args: argparse.Namespace) -> dict[str, float]:
 def online_options(args: argparse.Namespace, reproducible: bool) -> object:
     """The runner's OnlineOptions: deterministic unless asked otherwise where the flight is
     reproducible anyway (--auto-start), asynchronous with a ground station."""
-    from autopilot.online_control import OnlineOptions
+    from autopilot.online.online_control import OnlineOptions
 
     deterministic = args.online_deterministic
     if deterministic is None:

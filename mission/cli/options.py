@@ -133,7 +133,7 @@ def add_sensor_options(p: argparse.ArgumentParser) -> None:
 
 def sensor_arguments(args: argparse.Namespace) -> tuple[list[str], list[str]]:
     """(the simulator's options, the autopilot's --param options) for the chosen sensors."""
-    from autopilot.estimator_params import SENSOR_SETS
+    from autopilot.estimation.estimator_params import SENSOR_SETS
 
     sim = ["--ideal-sensors"] if args.ideal_sensors else []
     if args.sensor_seed is not None:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from autopilot.mission_items import FRAME_MISSION, POSITIONLESS, Home, MissionItem
+from autopilot.commander.mission_items import FRAME_MISSION, POSITIONLESS, Home, MissionItem
 from simbridge.config import ConfigError
 
 DEGE7_PER_DEG = 10_000_000

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from autopilot.mission_items import Geofence, Home, MissionError, validate_mission
+from autopilot.commander.mission_items import Geofence, Home, MissionError, validate_mission
 from mission.plans.doc import MissionDoc, ParsedMission, check_home, default_home
 from mission.plans.qgc import dump_plan, parse_plan
 from mission.plans.wpl import HEADER as WPL_HEADER

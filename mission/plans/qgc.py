@@ -15,7 +15,7 @@ import json
 import math
 from typing import Any
 
-from autopilot.mission_items import GLOBAL_FRAMES, MSL_FRAMES, Home, MissionItem
+from autopilot.commander.mission_items import GLOBAL_FRAMES, MSL_FRAMES, Home, MissionItem
 from mission.plans.doc import (
     MissionDoc,
     ParsedMission,

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 
-from autopilot.mission_items import Home, MissionItem
+from autopilot.commander.mission_items import Home, MissionItem
 from mission.plans.doc import MissionDoc, ParsedMission, carries_position, check_home, dege7_to_deg
 from simbridge.config import ConfigError
 from simbridge.hil import mavlink as mav

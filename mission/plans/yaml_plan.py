@@ -25,7 +25,7 @@ from typing import Any
 
 import yaml
 
-from autopilot.mission_items import (
+from autopilot.commander.mission_items import (
     DO_CHANGE_SPEED,
     FRAME_MISSION,
     GLOBAL_FRAMES,

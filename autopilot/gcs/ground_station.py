@@ -12,16 +12,17 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from autopilot import guided, requests, telemetry
-from autopilot.commander import AIRBORNE_PHASES, CommanderState, Phase
-from autopilot.controller import FlightState
-from autopilot.failsafes import Failsafes, check_failsafes
-from autopilot.gcs_link import GcsLink
-from autopilot.mission_items import Geofence, Home, MissionItem, is_home_row, plan_steps
-from autopilot.mission_protocol import MissionProtocol, Outcome
-from autopilot.modes import FlightMode, decode_mode
-from autopilot.param_protocol import ftp_nak, handle_param
+from autopilot.commander import guided, requests
+from autopilot.commander.commander import AIRBORNE_PHASES, CommanderState, Phase
+from autopilot.commander.failsafes import Failsafes, check_failsafes
+from autopilot.commander.mission_items import Geofence, Home, MissionItem, is_home_row, plan_steps
+from autopilot.commander.modes import FlightMode, decode_mode
+from autopilot.gcs import telemetry
+from autopilot.gcs.link import GcsLink
+from autopilot.gcs.mission_protocol import MissionProtocol, Outcome
+from autopilot.gcs.param_protocol import ftp_nak, handle_param
 from autopilot.params import ParamStore
+from autopilot.types import FlightState
 from simbridge.frames import euler_from_quat, local_to_geodetic
 from simbridge.hil import mavlink as mav
 

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from autopilot.ground_models import GroundEffectModel, default_network
+from autopilot.control.ground_models import GroundEffectModel, default_network
 from autopilot.params import ONLINE_METHODS, ParamStore
 from learner.dataset import COLUMNS, FEATURES, TARGETS
 from learner.online.memory import Memory, load_memory, memory_path_for, offline_path_for
@@ -110,7 +110,7 @@ class OnlineControl:
         self.options = options
         self.params = params
         self.network = network
-        self.learner: Any = None  # autopilot.online_learner.OnlineLearner, once learning
+        self.learner: Any = None  # autopilot.online.online_learner.OnlineLearner, once learning
         self.active = False
         self.errors: list[str] = []
         settings = settings_from(params, options.base)
@@ -147,7 +147,7 @@ class OnlineControl:
         p = self.params.online()
         try:
             if self.learner is None:
-                from autopilot.online_learner import OnlineLearner
+                from autopilot.online.online_learner import OnlineLearner
 
                 rho = self.params.model()[1]
                 net = model.net  # type: ignore[attr-defined]

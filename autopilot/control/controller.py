@@ -23,8 +23,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from autopilot.types import FlightState, Setpoint
 from simbridge.config import param
-from simbridge.frames import Quat, Vec3, euler_from_quat
+from simbridge.frames import Vec3, euler_from_quat
 from simbridge.rotors import Quad, prioritised_rotor_forces, rotor_speeds_for
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
@@ -99,22 +100,6 @@ class ControllerParams:
         JERK_DEFAULT_M_S3, unit="m/s^3", lo=0.0, hi=1000.0,
         doc="how fast a setpoint's jump may change the horizontal acceleration (0: at once)",
     )  # fmt: skip
-
-
-@dataclass(frozen=True)
-class FlightState:
-    position_m: Vec3  # world x east, y north, z up
-    velocity_m_s: Vec3  # world frame
-    quaternion: Quat  # (w, x, y, z), body to world
-    angular_velocity_body_rad_s: Vec3  # body x forward, y left, z up
-
-
-@dataclass(frozen=True)
-class Setpoint:
-    position_m: Vec3
-    velocity_m_s: Vec3 = (0.0, 0.0, 0.0)
-    acceleration_m_s2: Vec3 = (0.0, 0.0, 0.0)
-    yaw_rad: float = 0.0
 
 
 @dataclass(frozen=True)

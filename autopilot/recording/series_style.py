@@ -1,5 +1,5 @@
 """How each plotted series is named and coloured in the recording, so that no two series that
-share a view share a name or a colour (the blueprint's views: autopilot/blueprint.py)."""
+share a view share a name or a colour (the blueprint's views: autopilot/recording/blueprint.py)."""
 
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from autopilot.attitude import quat_mul, rotation, rotation_vector_floats, skew
+from autopilot.estimation.attitude import quat_mul, rotation, rotation_vector_floats, skew
 from simbridge.frames import Vec3, quat_multiply, quat_normalize
 from simbridge.vehicle import GRAVITY_M_S2
 

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 import rerun as rr
 
-from autopilot.mission_items import PlanStep
+from autopilot.commander.mission_items import PlanStep
 from learner.flightlogs.recording import (
     DRONE_ARMS,
     DRONE_BODY,

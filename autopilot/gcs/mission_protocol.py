@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from autopilot.mission_items import (
+from autopilot.commander.mission_items import (
     Geofence,
     Home,
     MissionError,

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import math
 
-from autopilot.controller import FlightState
-from autopilot.simlink import Step
+from autopilot.types import FlightState, Step
 from simbridge.frames import Vec3, frd_to_flu, quat_to_matrix, rotate
 from simbridge.hil import RAD_S_TO_RPM
 from simbridge.rotors import Quad

@@ -4,7 +4,7 @@ The control loop calls `submit` (never blocks: a full queue drops the sample and
 and reads `snapshot` (one reference, replaced whole by the learner thread).
 
 Asynchronous (the default with a ground station): samples go, in chunks of CHUNK_SAMPLES,
-down a pipe to the learner process (autopilot/learner_process.py), which runs the update
+down a pipe to the learner process (autopilot/online/learner_process.py), which runs the update
 on the other core; the queue is the pipe, bounded by the samples sent and not yet taken
 off it. The learner thread here waits on the pipe for new weights and publishes each as
 an immutable snapshot by one reference assignment; it holds the interpreter only for that.
@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from autopilot.learner_process import (
+from autopilot.online.learner_process import (
     ROW_FEATURES,
     ROW_TARGETS,
     ROW_TIME,

@@ -1,5 +1,6 @@
 """What and where a flight records, and how often it flushes: shared by the recorder's
-front (`autopilot.recorder`) and its rerun writer (`autopilot.flight_recorder`)."""
+front (`autopilot.recording.recorder`) and its rerun writer
+(`autopilot.recording.flight_recorder`)."""
 
 from __future__ import annotations
 

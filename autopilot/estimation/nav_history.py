@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from collections import deque
 
-from autopilot import estimator as ekf
-from autopilot.attitude import rotation_vector_floats
+from autopilot.estimation import estimator as ekf
+from autopilot.estimation.attitude import rotation_vector_floats
 from simbridge.frames import Quat, Vec3, quat_conjugate, quat_multiply, quat_normalize
 
 

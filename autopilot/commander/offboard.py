@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from autopilot.controller import Setpoint
+from autopilot.types import Setpoint
 from simbridge.frames import Vec3, geodetic_to_local
 from simbridge.hil import mavlink as mav
 

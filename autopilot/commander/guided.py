@@ -14,11 +14,17 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from autopilot import requests
-from autopilot.commander import CommanderParams, CommanderState
-from autopilot.mission_items import Geofence
-from autopilot.modes import FlightMode
-from autopilot.offboard import Refused, Target, global_position, global_target, local_target
+from autopilot.commander import requests
+from autopilot.commander.commander import CommanderParams, CommanderState
+from autopilot.commander.mission_items import Geofence
+from autopilot.commander.modes import FlightMode
+from autopilot.commander.offboard import (
+    Refused,
+    Target,
+    global_position,
+    global_target,
+    local_target,
+)
 from simbridge.frames import Vec3
 from simbridge.hil import mavlink as mav
 

@@ -10,10 +10,16 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from autopilot.commander import AIRBORNE_PHASES, CommanderParams, CommanderState, Phase, go_to
-from autopilot.mission_items import PlanStep
-from autopilot.modes import FlightMode
-from autopilot.offboard import Target
+from autopilot.commander.commander import (
+    AIRBORNE_PHASES,
+    CommanderParams,
+    CommanderState,
+    Phase,
+    go_to,
+)
+from autopilot.commander.mission_items import PlanStep
+from autopilot.commander.modes import FlightMode
+from autopilot.commander.offboard import Target
 from simbridge.frames import Vec3
 from simbridge.hil import mavlink as mav
 

@@ -3,7 +3,7 @@
 `FlightRecorder.step` appends one tuple per control step in the order of `Row` below (so
 that the loop pays for one tuple, nothing more); `RowSender.send` turns a block of them into
 columns: every step's plots as one Arrow batch, the truth and the ESC telemetry where they
-arrived, the 3-D scene at 50 Hz and the trail (`autopilot.trail`).
+arrived, the 3-D scene at 50 Hz and the trail (`autopilot.recording.trail`).
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from autopilot.rrbatch import ColumnBatch
-from autopilot.trail import Trail, firsts
+from autopilot.recording.rrbatch import ColumnBatch
+from autopilot.recording.trail import Trail, firsts
 from learner.flightlogs.recording import (
     DRONE,
     GE_ARROW_M_PER_N,
@@ -68,7 +68,8 @@ def _scalars(width: int) -> Any:
 
 def world_acceleration(q: np.ndarray, specific_force_frd: np.ndarray) -> np.ndarray:
     """The accelerometer's specific force (body FRD, m/s^2) in the world frame, gravity
-    removed: as autopilot.flight_log.kinematic_acceleration_m_s2, for many steps at once."""
+    removed: as autopilot.recording.flight_log.kinematic_acceleration_m_s2, for many steps at
+    once."""
     flu = specific_force_frd * np.array([1.0, -1.0, -1.0])
     world = np.einsum("nij,nj->ni", quat_to_matrices(q), flu)
     world[:, 2] -= GRAVITY_M_S2

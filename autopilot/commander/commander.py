@@ -1,10 +1,10 @@
 """The commander: flight modes, arming, missions, take-off, landing, as pure functions.
 
-Two things describe the vehicle. The flight mode is what a ground station chose (hold,
-mission, takeoff, land, return, offboard, guided; `autopilot.modes`). The phase is what the vehicle
-is doing: DISARMED -> ARMED (idling on the ground) -> TAKING_OFF -> FLYING / HOLDING ->
-LANDING -> LANDED (touchdown held for `touchdown_s`: rotors off, disarmed). Requests from a
-ground station (`requests.py`) change the state; `command` steps it once per control step.
+Two things describe the vehicle. The flight mode is what a ground station chose (hold, mission,
+takeoff, land, return, offboard, guided; `autopilot.commander.modes`). The phase is what the vehicle
+is doing: DISARMED -> ARMED (idling on the ground) -> TAKING_OFF -> FLYING / HOLDING -> LANDING ->
+LANDED (touchdown held for `touchdown_s`: rotors off, disarmed). Requests from a ground station
+(`requests.py`) change the state; `command` steps it once per control step.
 
 Setpoints lead the vehicle towards their target by at most what the mission speeds allow
 (`limited_setpoint`), so DO_CHANGE_SPEED and MPC_XY_CRUISE mean what they say.
@@ -17,10 +17,10 @@ import math
 from dataclasses import dataclass
 from enum import StrEnum
 
-from autopilot.controller import Setpoint
-from autopilot.mission_items import PlanStep
-from autopilot.modes import FlightMode
-from autopilot.offboard import Target, Track, follow
+from autopilot.commander.mission_items import PlanStep
+from autopilot.commander.modes import FlightMode
+from autopilot.commander.offboard import Target, Track, follow
+from autopilot.types import Setpoint
 from simbridge.config import param
 from simbridge.frames import Vec3
 
@@ -318,7 +318,7 @@ def command(
     vertical_lead_s: float | None = None,
 ) -> Command:
     """One commander step at `time_s` from the vehicle's position and height above the surface;
-    `ground_contact`: the land detector's verdict (autopilot/land_detector.py)."""
+    `ground_contact`: the land detector's verdict (autopilot/control/land_detector.py)."""
     phase = state.phase
     if phase in (Phase.DISARMED, Phase.LANDED):
         return Command(state, None, False)

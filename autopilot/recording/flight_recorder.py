@@ -1,6 +1,6 @@
-"""The flight recorder's writer: `FlightRecorder`, opened through `autopilot.recorder`.
+"""The flight recorder's writer: `FlightRecorder`, opened through `autopilot.recording.recorder`.
 
-See `autopilot.recorder` for what it records and how it keeps out of the loop's way, and
+See `autopilot.recording.recorder` for what it records and how it keeps out of the loop's way, and
 `learner.flightlogs.recording` for the layout.
 """
 
@@ -17,20 +17,20 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from autopilot.blueprint import default_blueprint, z_range_m
-from autopilot.controller import ControlOutput, FlightState, Setpoint
-from autopilot.mission_items import PlanStep
-from autopilot.record_options import FLUSH_WALL_S, RecordOptions
-from autopilot.recorder_rows import RowSender, scalars_key
-from autopilot.rrbatch import ColumnBatch
-from autopilot.scene import (
+from autopilot.commander.mission_items import PlanStep
+from autopilot.control.controller import ControlOutput
+from autopilot.recording.blueprint import default_blueprint, z_range_m
+from autopilot.recording.record_options import FLUSH_WALL_S, RecordOptions
+from autopilot.recording.recorder_rows import RowSender, scalars_key
+from autopilot.recording.rrbatch import ColumnBatch
+from autopilot.recording.scene import (
     log_drone,
     log_mission,
     log_world,
     mission_path,
 )
-from autopilot.series_style import GE_COLORS, counter_style, series_style
-from autopilot.simlink import Step
+from autopilot.recording.series_style import GE_COLORS, counter_style, series_style
+from autopilot.types import FlightState, Setpoint, Step
 from learner.flightlogs.recording import (
     APPLICATION_ID,
     COUNTERS,

@@ -8,19 +8,32 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from autopilot import requests
-from autopilot.commander import AIRBORNE_PHASES, CommanderParams, CommanderState
-from autopilot.mission_items import Geofence
-from autopilot.modes import FlightMode
-from autopilot.params import (
-    ACTION_HOLD,
-    ACTION_LAND,
-    ACTION_NAMES,
-    ACTION_NONE,
-    ACTION_RETURN,
-    FailsafeParams,
-)
+from autopilot.commander import requests
+from autopilot.commander.commander import AIRBORNE_PHASES, CommanderParams, CommanderState
+from autopilot.commander.mission_items import Geofence
+from autopilot.commander.modes import FlightMode
+from simbridge.config import param
 from simbridge.frames import Vec3
+
+# failsafe actions, PX4's numbering for NAV_DLL_ACT and GF_ACTION
+ACTION_NONE, ACTION_WARN, ACTION_HOLD, ACTION_RETURN, ACTION_LAND = 0, 1, 2, 3, 5
+ACTION_NAMES = {0: "none", 1: "warn", 2: "hold", 3: "return", 5: "land"}
+
+
+@dataclass(frozen=True)
+class FailsafeParams:
+    gcs_loss_action: int = param(
+        ACTION_NONE,
+        lo=0,
+        hi=5,
+        doc="ground station lost in flight: 0 none, 2 hold, 3 return, 5 land",
+    )
+    gcs_loss_timeout_s: float = param(
+        5.0, unit="s", lo=0.5, hi=300.0, doc="no ground-station heartbeat this long (wall clock)"
+    )
+    fence_action: int = param(
+        ACTION_RETURN, lo=0, hi=5, doc="geofence breached: 0 none, 1 warn, 2 hold, 3 return, 5 land"
+    )
 
 
 @dataclass

@@ -5,11 +5,11 @@ HIL_STATE_QUATERNION, the true ground-effect force in DEBUG_VECT "GE_TRUE", the 
 speeds in ESC telemetry), so the autopilot alone writes truth and its own view side by side:
 one process, one file, one recording id. The layout is `learner.flightlogs.recording`'s.
 
-The loop must not wait for it. `step` appends one tuple per control step; every
-`flush_every_s` of simulated time (or FLUSH_WALL_S of wall time, if that comes first) the
-rows become numpy columns and leave as a few Arrow record batches (`autopilot.recorder_rows`,
-`autopilot.rrbatch`: one per set of entities sharing their times, not one call per entity);
-rerun encodes and writes them on its own thread. A SIGKILL loses at most the rows since the
+The loop must not wait for it. `step` appends one tuple per control step; every `flush_every_s` of
+simulated time (or FLUSH_WALL_S of wall time, if that comes first) the rows become numpy columns and
+leave as a few Arrow record batches (`autopilot.recording.recorder_rows`,
+`autopilot.recording.rrbatch`: one per set of entities sharing their times, not one call per
+entity); rerun encodes and writes them on its own thread. A SIGKILL loses at most the rows since the
 last flush (and the footer: the reader copes).
 """
 
@@ -18,12 +18,12 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
-from autopilot.record_options import RecordOptions
+from autopilot.recording.record_options import RecordOptions
 
 if TYPE_CHECKING:
-    from autopilot.controller import ControlOutput, FlightState, Setpoint
-    from autopilot.mission_items import PlanStep
-    from autopilot.simlink import Step
+    from autopilot.commander.mission_items import PlanStep
+    from autopilot.control.controller import ControlOutput
+    from autopilot.types import FlightState, Setpoint, Step
     from simbridge.frames import Vec3
     from simbridge.rotors import Quad
     from simbridge.vehicle import Vehicle
@@ -100,6 +100,6 @@ def open_recorder(
         return NullRecorder()
     # imported here: rerun takes a quarter of a second to import, which an autopilot that
     # does not record should not wait for
-    from autopilot.flight_recorder import FlightRecorder
+    from autopilot.recording.flight_recorder import FlightRecorder
 
     return FlightRecorder(options, vehicle, modes)

@@ -8,8 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from autopilot.controller import FlightState
-from autopilot.simlink import Step
+from autopilot.types import FlightState, Step
 from learner.flightlogs.flightlog import FlightLog, write_log
 from simbridge.frames import frd_to_flu, quat_to_matrix, rotate
 from simbridge.rotors import Quad

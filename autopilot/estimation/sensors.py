@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from autopilot.simlink import Step
+from autopilot.types import Step
 from simbridge.frames import Vec3, frd_to_flu
 
 

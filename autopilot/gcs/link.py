@@ -19,8 +19,8 @@ import socket
 from dataclasses import dataclass, field
 from typing import Any
 
-from autopilot.port_owner import port_owner
-from autopilot.signing import SignedMAVLink, Signing
+from autopilot.gcs.port_owner import port_owner
+from autopilot.gcs.signing import SignedMAVLink, Signing
 from simbridge.config import ConfigError
 from simbridge.hil import mavlink as mav
 

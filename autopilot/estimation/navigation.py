@@ -5,10 +5,10 @@ magnetometer and barometer; ODOMETRY from motion capture; HIL_GPS; the downward 
 HIL_OPTICAL_FLOW). HIL_STATE_QUATERNION, the simulator's truth, is never read here.
 
 Which sensors correct the filter is chosen by parameters named as PX4's EKF2 names them
-(`autopilot.estimator_params`). The height reference (EKF2_HGT_REF) falls back, when its source goes
-quiet, to the next available of range, barometer, GPS. A downward range reading also feeds
-a one-state terrain estimate (PX4's terrain estimator), so the height above the surface
-below (the ground-effect model's input) is the estimated altitude minus the terrain's.
+(`autopilot.estimation.estimator_params`). The height reference (EKF2_HGT_REF) falls back, when its
+source goes quiet, to the next available of range, barometer, GPS. A downward range reading also
+feeds a one-state terrain estimate (PX4's terrain estimator), so the height above the surface below
+(the ground-effect model's input) is the estimated altitude minus the terrain's.
 """
 
 from __future__ import annotations
@@ -18,10 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from autopilot import estimator as ekf
-from autopilot.attitude import attitude_from_gravity_and_field, yaw_of
-from autopilot.controller import FlightState
-from autopilot.estimator_params import (
+from autopilot.estimation import estimator as ekf
+from autopilot.estimation.attitude import attitude_from_gravity_and_field, yaw_of
+from autopilot.estimation.estimator_params import (
     EV_HPOS,
     EV_VPOS,
     EV_YAW,
@@ -32,10 +31,10 @@ from autopilot.estimator_params import (
     HEIGHT_NAMES,
     EstimatorParams,
 )
-from autopilot.nav_history import PredictionHistory
-from autopilot.sensors import Imu, imu_from, pressure_altitude_m, range_reading
-from autopilot.simlink import Step
-from autopilot.terrain import Terrain, terrain_update
+from autopilot.estimation.nav_history import PredictionHistory
+from autopilot.estimation.sensors import Imu, imu_from, pressure_altitude_m, range_reading
+from autopilot.estimation.terrain import Terrain, terrain_update
+from autopilot.types import FlightState, Step
 from simbridge.frames import Vec3, geodetic_to_local, ned_to_enu, quat_ned_frd_to_enu_flu
 
 RESTING_SD_M = 0.0005  # how well a standing vehicle knows the surface under it

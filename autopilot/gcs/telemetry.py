@@ -12,9 +12,9 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from autopilot.commander import AIRBORNE_PHASES, Phase
-from autopilot.controller import FlightState
-from autopilot.modes import IDENTITIES, FlightMode, custom_mode
+from autopilot.commander.commander import AIRBORNE_PHASES, Phase
+from autopilot.commander.modes import IDENTITIES, FlightMode, custom_mode
+from autopilot.types import FlightState
 from simbridge.frames import (
     enu_to_ned,
     euler_from_quat,

@@ -1,0 +1,1 @@
+"""Control: the feedback-linearising controller, the ground-effect models, the land detector."""

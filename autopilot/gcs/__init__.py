@@ -1,0 +1,2 @@
+"""The ground-station endpoint: the MAVLink link, signing, telemetry, the parameter and mission
+protocols."""

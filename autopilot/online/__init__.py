@@ -1,0 +1,1 @@
+"""Online learning in flight: the learner's host, its process, the learning samples."""
