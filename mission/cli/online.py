@@ -7,7 +7,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from learner.online.names import METHODS
+from learner.online.names import METHODS, method_number
+from learner.online.settings import tuned_in_flight
 from simbridge.config import ConfigError
 
 
@@ -18,7 +19,7 @@ def add_online_options(p: argparse.ArgumentParser) -> None:
         choices=METHODS,
         metavar="METHOD",
         help=f"adapt the neural model in flight: {', '.join(METHODS)} (parameter GFX_OL_METHOD; "
-        "hyperparameters GFX_OL_LR, GFX_OL_LAMBDA, GFX_OL_MARGIN, GFX_OL_FORGET via --param)",
+        f"hyperparameters {', '.join(tuned_in_flight())} via --param)",
     )
     mode = g.add_mutually_exclusive_group()
     mode.add_argument(
@@ -51,9 +52,7 @@ def online_overrides(args: argparse.Namespace) -> dict[str, float]:
         return {}
     if getattr(args, "model", None) not in (None, "neural"):
         raise ConfigError(f"--online {method}: needs --model neural, not --model {args.model}")
-    from autopilot.params import ONLINE_METHODS  # the parser needs none of the autopilot
-
-    return {"GFX_OL_METHOD": float(ONLINE_METHODS.index(method))}
+    return {"GFX_OL_METHOD": float(method_number(method))}
 
 
 def online_options(args: argparse.Namespace, reproducible: bool) -> object:
