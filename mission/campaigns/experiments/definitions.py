@@ -12,7 +12,7 @@ import hashlib
 import json
 from dataclasses import dataclass
 
-from learner.online.names import METHODS
+from learner.online.names import METHODS, PROTECTING
 from mission.campaigns.experiments.missions import MISSION_KINDS, make_mission
 
 ONLINE_METHODS = METHODS  # the conditions fly every online method there is
@@ -239,7 +239,7 @@ def _remembering() -> Experiment:
         (
             *(
                 Expectation(m, "naive", "lower", f"{m} forgets less than naive")
-                for m in ("constraint", "margin", "ewc", "replay", "composite")
+                for m in (*PROTECTING, "composite")  # composite: its memory of grounds
             ),
             Expectation("composite", "never-adapted", "similar", "composite recalls rho 1"),
         ),
