@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from autopilot.commander.commander import CommanderParams, CommanderState, Phase, command
-from autopilot.commander.modes import FlightMode
 from autopilot.control.land_detector import LandDetector, LandDetectorParams, ground_contact
 from autopilot.estimation import estimator as ekf
 from autopilot.estimation.attitude import (
@@ -19,6 +18,7 @@ from autopilot.estimation.attitude import (
     rotation,
     rotation_vector_quat,
 )
+from autopilot.types import FlightMode
 from simbridge.sensor_noise import SensorErrors, SensorNoise
 from simbridge.vehicle import GRAVITY_M_S2
 

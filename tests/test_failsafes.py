@@ -12,7 +12,7 @@ from autopilot.commander.failsafes import (
     check_failsafes,
 )
 from autopilot.commander.mission_items import Geofence
-from autopilot.commander.modes import FlightMode
+from autopilot.types import FlightMode
 
 HOME = (0.0, 0.0, 0.0126)
 

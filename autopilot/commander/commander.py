@@ -18,9 +18,8 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from autopilot.commander.mission_items import PlanStep
-from autopilot.commander.modes import FlightMode
 from autopilot.commander.offboard import Target, Track, follow
-from autopilot.types import Setpoint
+from autopilot.types import FlightMode, Setpoint
 from simbridge.config import param
 from simbridge.frames import Vec3
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from autopilot.commander import requests
 from autopilot.commander.commander import AIRBORNE_PHASES, CommanderParams, CommanderState
 from autopilot.commander.mission_items import Geofence
-from autopilot.commander.modes import FlightMode
+from autopilot.types import FlightMode
 from simbridge.config import param
 from simbridge.frames import Vec3
 
