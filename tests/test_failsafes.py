@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from autopilot.commander import requests
-from autopilot.commander.commander import CommanderParams, CommanderState, Phase
+from autopilot.commander.commander import CommanderState, Phase
+from autopilot.commander.commander_params import CommanderParams
 from autopilot.commander.failsafes import (
     ACTION_NONE,
     ACTION_RETURN,

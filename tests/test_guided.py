@@ -12,7 +12,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from autopilot.commander import guided, requests
-from autopilot.commander.commander import CommanderParams, CommanderState, Phase, command
+from autopilot.commander.commander import CommanderState, Phase, command
+from autopilot.commander.commander_params import CommanderParams
 from autopilot.commander.mission_items import (
     NAV_WAYPOINT,
     Geofence,

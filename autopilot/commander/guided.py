@@ -15,7 +15,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from autopilot.commander import requests
-from autopilot.commander.commander import CommanderParams, CommanderState
+from autopilot.commander.commander import CommanderState
+from autopilot.commander.commander_params import CommanderParams
 from autopilot.commander.mission_items import Geofence
 from autopilot.commander.offboard import (
     Refused,

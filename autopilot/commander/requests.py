@@ -10,13 +10,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from autopilot.commander.commander import (
-    AIRBORNE_PHASES,
-    CommanderParams,
-    CommanderState,
-    Phase,
-    go_to,
-)
+from autopilot.commander.commander import AIRBORNE_PHASES, CommanderState, Phase, go_to
+from autopilot.commander.commander_params import CommanderParams
 from autopilot.commander.mission_items import PlanStep
 from autopilot.commander.offboard import Target
 from autopilot.types import FlightMode
