@@ -23,7 +23,7 @@ from autopilot.types import FlightMode
 from simbridge.hil import mavlink as mav
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # one object per firmware: compared and hashed as itself
 class Identity:
     name: str  # as configuration and `--identity` spell it
     autopilot: int  # HEARTBEAT.autopilot (MAV_AUTOPILOT_*)
