@@ -21,7 +21,6 @@ import numpy as np
 from autopilot.commander import requests
 from autopilot.commander.commander import CommanderState, Phase, command
 from autopilot.commander.mission_items import MissionItem
-from autopilot.commander.modes import FlightMode
 from autopilot.control.controller import control, handover, integrate
 from autopilot.control.ground_models import (
     GroundEffectInputs,
@@ -35,6 +34,7 @@ from autopilot.estimation.navigation import Navigation
 from autopilot.gcs.ground_station import GroundStation, StepInput
 from autopilot.gcs.link import GcsLink
 from autopilot.gcs.signing import Signing
+from autopilot.identity import identity_named
 from autopilot.metrics import COLUMNS, flight_metrics, ge_error_metrics, trajectory_sha256
 from autopilot.nav_metrics import estimation_error, estimator_metrics
 from autopilot.online.learning_sample import learning_sample
@@ -44,7 +44,7 @@ from autopilot.recording.record_options import RecordOptions
 from autopilot.recording.recorder import open_recorder
 from autopilot.simlink import LinkLost, SimLink
 from autopilot.truth import true_height_m, true_state
-from autopilot.types import FlightState, Step
+from autopilot.types import FlightMode, FlightState, Step
 from simbridge.rotors import Quad
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
@@ -187,7 +187,9 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         recorder.event(text, "WARN" if text.startswith("failsafe") else "INFO", t)
 
     gcs = GcsLink(list(config.gcs_urls), config.signing)
-    station = GroundStation(gcs, config.params, config.identity, config.origin, on_event)
+    station = GroundStation(
+        gcs, config.params, identity_named(config.identity), config.origin, on_event
+    )
     # before the link: the simulator's clock runs from the connection to the first reply
     gc.collect()
     gc.freeze()  # what exists now (modules, models, the world) is never scanned again
