@@ -125,8 +125,8 @@ class GroundStation:
             self.initial_home_m = inp.state.position_m
 
     def _home_m(self, cmd: CommanderState) -> Vec3:
-        """Where the vehicle armed; before it ever did, where it was at the first step."""
-        return cmd.home_m if cmd.home_m is not None else self.initial_home_m
+        """Where it armed, else where it was at the first step, else the home given (origin)."""
+        return cmd.home_m or self.initial_home_m or (0.0, 0.0, 0.0)
 
     def save_signing(self, wall_s: float) -> None:
         if self.link.signing is not None:
