@@ -137,7 +137,7 @@ def world_force(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
         wall = WallEffectParams(gain=float(values["wall_effect"][0]))
         force += wall_force_array(wall, thrust, radius, d.wall_distances_m)
     force += _drag(values, d, vehicle)
-    for name, c in CANDIDATES.items():  # effects declared with their own force over a log
+    for name, c in registry.candidates().items():  # effects declared with a force over a log
         if c.log_force is not None and name in values:
             force += c.log_force(values[name], d, vehicle, f, thrust)
     if "sensor_latency" in values:
