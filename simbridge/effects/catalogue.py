@@ -355,3 +355,6 @@ register(SENSOR_BIAS, candidate_after="thrust_curve")
 register(LEARNED_RESIDUAL)
 for _effect in UNCATALOGUED_EFFECTS:
     register(_effect)
+
+# Effects declared in modules of their own register themselves when imported: one import
+# each below (docs/where-a-change-goes/effect.md).
