@@ -11,9 +11,10 @@ from __future__ import annotations
 import dataclasses
 import math
 
+from simbridge.effects import registry
 from simbridge.effects.actuators import thrust_axis_body
 from simbridge.effects.drag import body_drag_n, rotor_drag_n, wind_velocity_m_s
-from simbridge.effects.ground import ground_effect_forces_n, thrust_gain
+from simbridge.effects.ground import ground_effect_forces_n, hub_moment, thrust_gain
 from simbridge.effects.learned import learned_force_n
 from simbridge.effects.proximity import WALL_DIRECTIONS, wall_force_n
 from simbridge.effects.uncatalogued import (
@@ -77,8 +78,13 @@ class Simulation:
         self._learned_force = _zero3()
         self._gex, self._outwash = fx.ground_effect_exponential, fx.ground_outwash
         self._gex_force, self._outwash_force = _zero3(), _zero3()
+        # effects declared with their own force (simbridge/effects/registry.py)
+        known = registry.effects()
+        self._declared = [(n, p, known[n].force) for n, p in fx.items() if known[n].force]
+        self._declared_forces: dict[str, Vec3] = {n: (0.0, 0.0, 0.0) for n, *_ in self._declared}
         # one set of down rays per rotor serves every effect that reads rotor heights
         lengths = [e.ray_length_m for e in (self._ge, self._gex) if e is not None]
+        lengths += [p.ray_length_m for _, p, _ in self._declared if hasattr(p, "ray_length_m")]
         self._down_m = max(lengths + ([LEARNED_RAY_M] if self._learned else []), default=None)
         self._lift_off_us: int | None = None  # see time_since_takeoff_s
         body = build_body(self._cid, world, vehicle, self.true_mass_kg)
@@ -90,6 +96,7 @@ class Simulation:
             or self._outwash is not None
             or self._drag
             or self._learned is not None
+            or bool(self._declared)
         )
         self._hub_rays_only = (
             self._down_m is not None and self._ce is None and self._outwash is None
@@ -222,7 +229,7 @@ class Simulation:
             g = ground_effect_forces_n(f, heights, *self._ge_args)
             # the torque of vertical forces g_i at the hubs R r_i: (R s)_y, -(R s)_x with
             # s = sum g_i r_i in the body frame
-            sx, sy, sz = self._hub_moment(g)
+            sx, sy, sz = hub_moment(self._rotors_body, g)
             tx += m3 * sx + m4 * sy + m5 * sz
             ty -= m0 * sx + m1 * sy + m2 * sz
             total = g[0] + g[1] + g[2] + g[3]
@@ -239,7 +246,7 @@ class Simulation:
                 fi * exponential_gain(h, gain, decay) if h <= reach else 0.0
                 for fi, h in zip(f, heights, strict=True)
             ]
-            sx, sy, sz = self._hub_moment(g)
+            sx, sy, sz = hub_moment(self._rotors_body, g)
             tx += m3 * sx + m4 * sy + m5 * sz
             ty -= m0 * sx + m1 * sy + m2 * sz
             total = g[0] + g[1] + g[2] + g[3]
@@ -265,7 +272,8 @@ class Simulation:
         walls: tuple[float, ...],
         below: float,
     ) -> None:
-        """The wall effect, the outwash, drag and a learnt residual, where the world has them."""
+        """The wall effect, the outwash, drag, a learnt residual and the declared effects,
+        where the world has them."""
         wall = self._wall_effect
         if wall is not None:
             wf = wall_force_n(wall, thrust, self._radius, walls)
@@ -281,6 +289,14 @@ class Simulation:
             self._apply_drag(force, m, self._rotors.speeds_rad_s)
         if self._learned is not None:
             self._apply_learned(force, m, f, heights)
+        if self._declared:
+            vel, _ = pb.getBaseVelocity(self._body, physicsClientId=self._cid)
+            view = registry.BodyView(
+                self.time_s, self._pose[0], m, vel, tuple(f), thrust, tuple(heights),
+                self._radius, self.vehicle.weight_n,
+            )  # fmt: skip
+            d = registry.declared_forces_n(self._declared, view, self._declared_forces)
+            force[0], force[1], force[2] = force[0] + d[0], force[1] + d[1], force[2] + d[2]
 
     def _apply_drag(self, force: list[float], m: tuple[float, ...], n: list[float]) -> None:
         fx = self.effects
@@ -341,16 +357,6 @@ class Simulation:
             )
             for rx, ry, rz in self._rotors_body
         ]
-
-    def _hub_moment(self, g: list[float]) -> Vec3:
-        """sum g_i r_i over the rotors' body positions r_i."""
-        (r0, r1, r2, r3) = self._rotors_body
-        g0, g1, g2, g3 = g
-        return (
-            g0 * r0[0] + g1 * r1[0] + g2 * r2[0] + g3 * r3[0],
-            g0 * r0[1] + g1 * r1[1] + g2 * r2[1] + g3 * r3[1],
-            g0 * r0[2] + g1 * r1[2] + g2 * r2[2] + g3 * r3[2],
-        )
 
     def _ray_tests(
         self, pos: tuple[float, ...], m: tuple[float, ...]
@@ -463,6 +469,7 @@ class Simulation:
             ground_effect_exponential_n=tuple(self._gex_force),
             outwash_n=tuple(self._outwash_force),
             thrust_scale=self._rotors.thrust_scale,
+            declared_n=tuple(self._declared_forces.items()),
         )
 
     def close(self) -> None:
@@ -479,4 +486,4 @@ class Simulation:
 
 def with_effects(world: World, **effects: object) -> World:
     """A copy of `world` with some effects replaced (None removes one)."""
-    return dataclasses.replace(world, effects=dataclasses.replace(world.effects, **effects))
+    return dataclasses.replace(world, effects=world.effects.replace(**effects))

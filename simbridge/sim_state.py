@@ -65,3 +65,4 @@ class EffectForces:
     ground_effect_exponential_n: Vec3 = (0.0, 0.0, 0.0)
     outwash_n: Vec3 = (0.0, 0.0, 0.0)
     thrust_scale: float = 1.0  # thrust_decay's C_T scale
+    declared_n: tuple[tuple[str, Vec3], ...] = ()  # each effect declared with its own force

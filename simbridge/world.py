@@ -236,8 +236,7 @@ def load_world(name_or_path: str | Path = "default") -> World:
             model = path.parent / model
         if not model.is_file():
             raise ConfigError(f"{path}: effects: learned_residual.model_path: no such file {model}")
-        effects = dataclasses.replace(
-            world.effects,
+        effects = world.effects.replace(
             learned_residual=dataclasses.replace(learned, model_path=str(model.resolve())),
         )
         world = dataclasses.replace(world, effects=effects)

@@ -152,11 +152,11 @@ def diagnose(
     tried = [c for c in CANDIDATES if measured or not CANDIDATES[c].needs_accelerometer]
     if candidates is not None:
         tried = [c for c in tried if c in candidates]
-    # the effective sample size of the residual once the excited effects are all fitted
-    # (only an approximate fit: all excited candidates at once are ill-conditioned, and a
-    # few rows more or less sent the bounded trust region from 11 to 532 evaluations), from
-    # one start: the best of MULTI_START's gave the same ratio to 1e-4 on the bench's cases at
-    # six times the cost (10 s of a 24 s diagnosis)
+    # the effective sample size of the residual once the excited effects are all fitted:
+    # an approximate fit from one start, as all excited candidates at once are
+    # ill-conditioned and a few rows more or less change the bounded trust region's work
+    # many times over; the best of the candidates' multi-starts gives the same ratio to 1e-4
+    # on the bench's cases at six times the cost
     everything = gapfit.fit(
         problem,
         tuple(c for c in excited if c != "wind" and c in tried),

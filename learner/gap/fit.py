@@ -25,9 +25,6 @@ STRIDE = 2  # the search fits every 2nd row: enough to rank sets (`final_fit`: e
 Z_EXCITE = 8.0  # a typical-size effect must stand this many noise sigmas out of the data
 COLLINEAR_R2 = 0.98  # above: the data cannot tell two candidates apart
 DRAGS = ("rotor_drag", "body_drag")
-# effects whose force at a row depends on the rows before it (a lag, a coasting rotor, a late
-# sensor); without them a fit computes its model on the scored rows only
-HISTORY = ("motor_lag", "spin_down", "sensor_latency")
 
 
 @dataclass
@@ -68,12 +65,16 @@ class Problem:
     ) -> tuple[Problem, list[slice]]:
         """The problem whose `predicted` a fit of `names` scores, and the rows it scores:
         every row with `every_row`, else every STRIDE-th; computed on those rows only when no
-        effect needs the rows between them (HISTORY), the same figures for half the work."""
+        effect needs the rows between them (`Candidate.history`), the same figures for half
+        the work."""
         if every_row:
             return self, [slice(None)] * len(self.flights)
         every = [slice(None, None, STRIDE)] * len(self.flights)
-        # a differentiated acceleration's filter needs the rows between too
-        if any(h in names or h in self.nominal for h in HISTORY) or not all(
+        # an effect whose force at a row depends on the rows before it (a lag, a coasting
+        # rotor, a late sensor: `Candidate.history`) needs the rows between, and so does a
+        # differentiated acceleration's filter
+        history = [n for n, c in CANDIDATES.items() if c.history]
+        if any(h in names or h in self.nominal for h in history) or not all(
             d.measured_acceleration for d in self.flights
         ):
             return self, every
@@ -133,15 +134,8 @@ def start_values(name: str, nominal: Values, cat: dict[str, Candidate] | None = 
         return np.array(nominal[name], dtype=float)
     if c.null:  # a thrust curve: from its null exponent 1
         return c.null_values()
-    if name in (
-        "wind",
-        "thrust_mass",
-        "thrust_tilt",
-        "sensor_bias",
-        "sensor_latency",
-        "wall_effect",
-    ):
-        return np.zeros(len(c.params)) + (0.004 if name == "sensor_latency" else 0.0)
+    if c.start is not None:  # declared: a force of either sign starts from none
+        return np.array(c.start, dtype=float)
     return np.array(c.typical, dtype=float)
 
 
@@ -158,23 +152,14 @@ def _unpack(x: np.ndarray, names: tuple[str, ...]) -> Values:
     return out
 
 
-# Parameters whose least squares is not convex get several starts when they enter a fit: the
-# ground effect's cut-off height steps with rho (thesis section 3.3.1: 2 to 3 cm at rho 2.9
-# on the nano), a wall a fit started below it does not cross; a lag's and a delay's residual
-# has local minima a period apart.
-MULTI_START: dict[str, tuple[float, ...]] = {
-    "ground_effect": (1.0, 4.0, 12.0),
-    "ceiling_effect": (1.0, 4.0, 12.0),
-    "motor_lag": (0.02, 0.08),
-    "sensor_latency": (0.004, 0.02),
-}
-
-
-# Candidates whose force is held constant below a cut-off height that moves in centimetre
-# steps with rho (`simbridge.effects.ground.cutoff_height_m`): the fit's cost jumps where
-# it moves, and a descent from a start on one side stops at the wall (rho 0.6 on the nano
-# came out 0.70, stopped by the wall at 0.66 from the starts at 1, 4 and 12).
-WALLED = ("ground_effect", "ceiling_effect")
+# A candidate whose least squares is not convex (`Candidate.multi_start`) gets several starts
+# when it enters a fit: the ground effect's cut-off height steps with rho, a wall a fit
+# started below it does not cross; a lag's and a delay's residual has local minima a period
+# apart. One whose force is held constant below a cut-off height that moves in centimetre
+# steps with rho (`Candidate.walled`, `simbridge.effects.ground.cutoff_height_m`) is also
+# scanned between the steps: the fit's cost jumps where the cut-off moves, and a descent from
+# a start on one side stops at the wall (rho 0.6 on the nano came out 0.70, stopped by the
+# wall at 0.66 from the starts at 1, 4 and 12).
 WALL_MARGIN = 1.03  # the scan's points by an interval's edge: this factor inside it
 WALL_GRID = 2000  # points of the grid the walls are looked for on (0.4% apart over 0.01..25)
 
@@ -230,7 +215,7 @@ def fit(
     """Least squares of the candidates `names` (with the nominal world's other effects);
     `max_nfev`: at most this many evaluations (an approximate fit is enough); `start`: the
     values a previous fit found (a warm start); a non-convex candidate without one gets the
-    starts of MULTI_START, the best kept (unless not `multi_start`). On every STRIDE-th row,
+    starts of its `multi_start`, the best kept (unless not `multi_start`). On every STRIDE-th row,
     or with `every_row` on all (`final_fit`)."""
     stride = 1 if every_row else STRIDE
     rows = [slice(None, None, stride)] * len(problem.flights)
@@ -252,8 +237,8 @@ def fit(
     starts = [x0]
     offset = 0
     for c, part in zip(names, parts, strict=True):
-        if multi_start and c in MULTI_START and c not in start:
-            for v in MULTI_START[c]:
+        if multi_start and cat[c].multi_start and c not in start:
+            for v in cat[c].multi_start:
                 x = x0.copy()
                 x[offset] = np.clip(v / scale[offset], lo[offset], hi[offset])
                 if not any(np.allclose(x, y) for y in starts):
@@ -269,7 +254,7 @@ def fit(
 
     offset = 0
     for c, part in zip(names, parts, strict=True):
-        if multi_start and c in WALLED and c not in start:
+        if multi_start and cat[c].walled and c not in start:
             scanned = _best_between_walls(fun, x0, offset, scale[offset], lo[offset], hi[offset],
                                           problem.vehicle.rotor_radius_m)  # fmt: skip
             if not any(np.allclose(scanned, y) for y in starts):

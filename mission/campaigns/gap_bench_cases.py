@@ -53,7 +53,7 @@ def _cases() -> list[Case]:
                 {"rotor_drag": {"kxy": kk[0], "kz": kk[2]}},
             )
         )
-    # b at the top of the physical range (learner/gap/candidates.py PHYSICAL: 2.5)
+    # b at the top of the physical range (simbridge/effects/catalogue.py BODY_DRAG: 2.5)
     for tag, cd in (("a", 1.5), ("b", 2.4)):
         # quadratic in speed: at the mixed flights' 1.5 m/s a C_d of 1 is 3 mN on a 0.55 N
         # vehicle, below the excitation threshold (z = 5); at 3 m/s four times that

@@ -151,3 +151,15 @@ class CeilingEffectParams:
 
     def cutoff_for(self, rotor_radius_m: float) -> float:
         return resolve_cutoff_m(self.rho, self.cutoff_m, rotor_radius_m)
+
+
+def hub_moment(rotors_body_m: Sequence[Sequence[float]], g: Sequence[float]) -> tuple[float, ...]:
+    """sum g_i r_i over the rotors' body positions r_i: with vertical forces g_i at the hubs
+    R r_i, the world torque is ((R s)_y, -(R s)_x, 0) for this s."""
+    r0, r1, r2, r3 = rotors_body_m
+    g0, g1, g2, g3 = g
+    return (
+        g0 * r0[0] + g1 * r1[0] + g2 * r2[0] + g3 * r3[0],
+        g0 * r0[1] + g1 * r1[1] + g2 * r2[1] + g3 * r3[1],
+        g0 * r0[2] + g1 * r1[2] + g2 * r2[2] + g3 * r3[2],
+    )
