@@ -221,7 +221,7 @@ def test_drag_a_world_leaves_out_follows_its_vehicle() -> None:
     assert shares["crazyflie2"] == pytest.approx(shares["nano"], rel=1e-9)
     assert shares["quad_2_7kg"] == pytest.approx(shares["nano"], rel=1e-9)
     nano = effects.for_vehicle(load_vehicle("nano"))
-    assert nano.rotor_drag.coefficient_n_s_m == (2.2e-5, 2.2e-5, 1.0e-5)  # as before
+    assert nano.rotor_drag.coefficient_n_s_m == (2.2e-5, 2.2e-5, 1.0e-5)  # the file's
     assert nano.body_drag.area_m2 == (0.002016, 0.002016, 0.0064)
     # the Crazyflie's within a factor of two of what Foerster 2015 identified on one
     k_cf = effects.for_vehicle(load_vehicle("crazyflie2")).rotor_drag.coefficient_n_s_m[0]

@@ -57,7 +57,7 @@ def test_a_large_frame_flies_the_bench_missions_clear_of_the_ground() -> None:
                     assert z - half_h * math.cos(math.pi / 6) - half_diag * 0.5 >= 0.05 - 1e-9
             for name in ("nano", "crazyflie2", "crazyflie2_large"):
                 small = bench_mission(kind, seed, vehicle=load_vehicle(name))
-                assert small == bench_mission(kind, seed)  # the nano's, as before
+                assert small == bench_mission(kind, seed)  # the nano's own
 
 
 def test_vertical_speed_limits_let_a_metre_step_be_the_loops_plain_step() -> None:

@@ -1,4 +1,4 @@
-"""The diagnosis names the right effect or says it cannot (issue 16): a wind enters with the
+"""The diagnosis names the right effect or says it cannot: a wind enters with the
 drag it acts through and is the same on every flight; a force outside the catalogue is
 reported as unexplained, learnt, and carried into a corrected world the simulator loads."""
 

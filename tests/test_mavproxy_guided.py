@@ -1,4 +1,4 @@
-"""What a new MAVProxy user does in the first hour (issue 18), with MAVProxy 1.8.75 over
+"""What a new MAVProxy user does in the first hour, with MAVProxy 1.8.75 over
 loopback UDP against `groundfx autopilot` at its default parameters: an 8 m square from a WPL
 file under both identities, every corner checked on the recording the autopilot wrote; guided
 flight under ArduCopter (`mode GUIDED`, `takeoff`, `guided LAT LON ALT` both ways, `position`).

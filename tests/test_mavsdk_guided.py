@@ -1,4 +1,4 @@
-"""What a new MAVSDK user does in the first hour (issue 18), with MAVSDK 4.1 over loopback
+"""What a new MAVSDK user does in the first hour, with MAVSDK 4.1 over loopback
 UDP against `groundfx autopilot` at its default parameters: an 8 m square through the mission
 plugin under both identities, every corner checked on the recording the autopilot wrote;
 goto_location and offboard velocity under both (under ArduCopter both are flown in Guided)."""

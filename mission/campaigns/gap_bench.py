@@ -22,7 +22,7 @@ from simbridge.vehicle import load_vehicle
 FIT_SEEDS = (0, 1)
 HOLD_SEEDS = (100,)
 BASE: dict[str, Any] = {"vehicle": "nano", "physics_rate_hz": 1000, "control_period_s": 0.004}
-PARAMETER_TARGET = 0.10  # relative parameter error of a catalogue case (issue 16)
+PARAMETER_TARGET = 0.10  # relative parameter error of a catalogue case
 
 
 def _world_file(path: Path, case: Case, effects: tuple[dict, ...]) -> Path:
@@ -115,7 +115,7 @@ def score(case: Case, result: dict[str, Any]) -> dict[str, Any]:
         # out of the catalogue there is no set to name: the verdict below scores it
         "exact": None if case.uncatalogued else exact,
         "max_relative_error": max(errors) if errors else None,
-        # issue 16's catalogue target: the exact set, every parameter within 10%
+        # a catalogue case's target: the exact set, every parameter within 10%
         "catalogue_target": (
             exact and all(e <= PARAMETER_TARGET for e in errors)
             if case.truth and not case.uncatalogued

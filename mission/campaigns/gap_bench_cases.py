@@ -219,9 +219,9 @@ def _cases() -> list[Case]:
             nominal=(GE, DRAG),
         )
     )
-    # a hover's small motions (a 0.9 mN gap) still identify twice the default drag: since
-    # every candidate is tried, the case is scored as found (kxy within 5% in the bench of
-    # issue 16), no longer as "not excited" by the excitation probe's conservative z
+    # a hover's small motions (a 0.9 mN gap) still identify twice the default drag: every
+    # candidate is tried, so the case is scored on its fit (kxy within 5%), not judged "not
+    # excited" by the excitation probe's conservative z
     for kind in ("hover", "aggressive"):
         c.append(
             Case(
@@ -239,7 +239,7 @@ def _cases() -> list[Case]:
 
 
 def _hard_cases(drag: list[float]) -> list[Case]:
-    """Issue 16: catalogue effects far from nominal beside a second one, three at once, and
+    """Catalogue effects far from nominal beside a second one, three at once, and
     effects outside the catalogue. Magnitudes: clear in the residual in their regime (several
     % of the weight), yet flown and landed by the autopilot, which knows none of them."""
     return [

@@ -1,4 +1,4 @@
-"""The gap bench's verdict on an effect outside the catalogue (issue 16): the diagnosis cannot
+"""The gap bench's verdict on an effect outside the catalogue: the diagnosis cannot
 name it, so it is scored on what it says about it instead:
 
 - located: the unexplained residual is placed in the expected regime (an entry of

@@ -35,7 +35,7 @@ KINDS = ("mixed", "hover", "aggressive", "wall", "ceiling")
 # Identification flights climb and descend faster than a cautious default: the rotor drag's
 # vertical coefficient is seen only through vertical speed, which legs cruising at nearly
 # one height hardly have (0.09 m/s RMS). The limits clip the position loop's error at speed
-# x lead (1 s), so moves shorter than that are the loop's plain step, as before.
+# x lead (1 s), so moves shorter than that are the loop's plain step.
 VERTICAL_SPEED_M_S = 1.0
 AUTOPILOT_PARAMS: tuple[str, ...] = (
     f"MPC_Z_V_AUTO_UP={VERTICAL_SPEED_M_S}",

@@ -6,7 +6,7 @@ rate, every 64 samples, while the control loop runs). Its own world, so that lea
 barely changes the trajectory: in a world it must adapt to, the learning flight flies a
 different path (nearer the ground, shorter), and the figures would compare two flights
 rather than the learner's cost. Pairs alternate so that load from elsewhere falls on
-both; the figures are medians over the pairs. Targets (issue 6): p99 controller step latency
+both; the figures are medians over the pairs. Targets: p99 controller step latency
 at most 20 % higher, real-time factor at least 80 % of learner-off. `composite` flies the
 basis model (`grounds`), off and on alike.
 """

@@ -34,7 +34,7 @@ class SpinDownParams:
     ESC without active braking): above its command it slows only by its propeller's drag
     torque, I n' = -k_q n^2, so from hover speed n_h it halves its speed in
     `time_constant_s` = I / (k_q n_h) (n = n_h / (1 + t / tau)); towards a higher command
-    it follows as before. A Crazyflie's 46 mm propeller and motor (about 9e-8 kg m^2,
+    it follows its lag. A Crazyflie's 46 mm propeller and motor (about 9e-8 kg m^2,
     k_q = k_z C_T = 1.7e-10 N m s^2, n_h 1650 rad/s): 0.3 s; a 12-inch propeller on an
     unbraked ESC about 0.8 s."""
 
