@@ -180,7 +180,7 @@ class World:
     obstacles: tuple[Box, ...] = ()
     sensors: SensorRates = param(SensorRates(), doc="HIL message rates")
     sensor_noise: SensorNoise = param(
-        SensorNoise(), doc="sensor errors (simbridge/sensor_noise.py gives the sources)"
+        SensorNoise(), doc="sensor errors (sources: simbridge/sensor_noise.py, simbridge/sensors)"
     )
     effects: EffectSet = EffectSet()
 

@@ -16,10 +16,16 @@ from tests.helpers import REPO
 TOY_SIM = '''
 """A toy velocity sensor: the world-frame velocity, as VISION_SPEED_ESTIMATE (NED)."""
 
+from dataclasses import dataclass
+
+from simbridge.config import param
 from simbridge.frames import enu_to_ned
 from simbridge.sensors import SimSensor, mavlink, register
 
-NOISE_M_S = 0.01  # per axis
+
+@dataclass(frozen=True)
+class ToyNoise:
+    toy_velocity_m_s: float = param(0.01, unit="m/s", lo=0.0, hi=1.0, doc="per axis")
 
 
 class ToyVelocity:
@@ -31,7 +37,8 @@ class ToyVelocity:
 
     def __call__(self, time_us):
         s = self.ctx.delayed(self.ctx.state_delay)
-        v = enu_to_ned(self.ctx.errors.vector(s.velocity_m_s, NOISE_M_S))
+        errors = self.ctx.errors
+        v = enu_to_ned(errors.vector(s.velocity_m_s, errors.noise.toy_velocity_m_s))
         return [(self._pack, (time_us, v[0], v[1], v[2], [0.0] * 9, 0))]
 
 
@@ -41,6 +48,7 @@ register(SimSensor(
     rate_hz=20.0,
     doc="VISION_SPEED_ESTIMATE, a toy velocity sensor",
     sampler=ToyVelocity,
+    noise=ToyNoise,
 ))
 '''
 

@@ -1,9 +1,10 @@
-"""The simulator's sensors besides the IMU, each declared once: its name, its rate and the
-sampler that measures the vehicle and packs the HIL message(s) it sends.
+"""The simulator's sensors besides the IMU, each declared once: its name, its rate, its noise
+and the sampler that measures the vehicle and packs the HIL message(s) it sends.
 
 A declaration names the sensor; the autopilot's declaration of the same name
 (`autopilot.estimation.sources`) reads and fuses what it sends. The world's `sensors:` section
-takes each declared rate by its `rate_key`; the HIL encoder samples each sensor at its rate, in
+takes each declared rate by its `rate_key`, its `sensor_noise:` section each declared noise
+field (`simbridge.sensor_noise`); the HIL encoder samples each sensor at its rate, in
 the order of `SENSORS` (the order the sensor errors are drawn in: a seed gives one flight).
 Sensors outside this package are declared by modules named in GROUNDFX_SIM_SENSORS
 (comma-separated), imported here; each calls `register`.
@@ -21,11 +22,9 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: F401 (the sensors pack with it)
 
 if TYPE_CHECKING:
-    from simbridge.sensor_noise import SensorErrors
     from simbridge.sim_state import VehicleState
     from simbridge.vehicle import Vehicle
     from simbridge.wire import WirePacker
-    from simbridge.world import World
 
 Frame = tuple["WirePacker", tuple]  # a message's packer and its fields, packed later
 PLUGINS_ENV = "GROUNDFX_SIM_SENSORS"
@@ -35,9 +34,9 @@ class SensorContext(Protocol):
     """What the HIL encoder offers a sampler: the flight's world, vehicle and errors, the
     delayed states, and the frames' units."""
 
-    world: World
+    world: Any  # simbridge.world.World (which reads the declarations: no import back)
     vehicle: Vehicle
-    errors: SensorErrors
+    errors: Any  # simbridge.sensor_noise.SensorErrors (the same)
     state_delay: int  # the state's latency, in control steps
     period_us: int
 
@@ -69,6 +68,9 @@ class SimSensor:
     rate_hz: float  # the rate when the world file gives none; 0: off
     doc: str  # what it sends, for the world file's reference
     sampler: Callable[[SensorContext], Sampler]  # made once per flight
+    # a frozen dataclass of its error figures (`param()` fields, names unique across the
+    # sensors), read by the sampler from `SensorErrors.noise`; None: it does not err
+    noise: type | None = None
 
 
 SENSORS: dict[str, SimSensor] = {}

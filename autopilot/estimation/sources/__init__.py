@@ -16,15 +16,44 @@ import importlib
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
-    from autopilot.estimation.navigation import Navigation
+    from autopilot.estimation import estimator as ekf
+    from autopilot.estimation.estimator_params import EstimatorParams
     from autopilot.estimation.sensors import Imu
     from autopilot.types import Step
 
 PLUGINS_ENV = "GROUNDFX_AUTOPILOT_SENSORS"
 SLOW_FUSION_EVERY = 5  # heading, barometer, rest: every fifth control step (50 Hz)
+
+
+class Navigation(Protocol):
+    """What a source's fusion reads and corrects of the estimator
+    (`autopilot.estimation.navigation.Navigation`)."""
+
+    estimate: ekf.Estimate | None
+    params: EstimatorParams
+    quality: Any  # counts per source (`navigation.Quality`)
+    events: list[str]
+    memory: dict[str, Any]  # what the sources keep from step to step
+    range_m: float | None  # the step's downward range, for the height fusion
+    height_source: str
+    origin: tuple[float, float, float]
+    resting_height_m: float
+
+    @property
+    def steps(self) -> int: ...
+
+    def settings(self, source: str) -> Any: ...
+
+    def seen(self, label: str, t: float) -> None: ...
+
+    def alive(self, label: str, t: float) -> bool: ...
+
+    def at_capture(self, time_us: int) -> tuple[Any, Any]: ...
+
+    def fuse(self, source: str, fused: ekf.Fused) -> bool: ...
 
 
 @dataclass(frozen=True)

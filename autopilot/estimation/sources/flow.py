@@ -9,13 +9,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from autopilot.estimation import estimator as ekf
-from autopilot.estimation.sources import Source, register
+from autopilot.estimation.sources import Navigation, Source, register
 from autopilot.estimation.sources.mocap import EV_HPOS
 from autopilot.estimation.sources.mocap import LABEL as MOCAP
 from simbridge.config import param
 
 if TYPE_CHECKING:
-    from autopilot.estimation.navigation import Navigation
     from autopilot.estimation.sensors import Imu
     from autopilot.types import Step
 

@@ -9,12 +9,11 @@ import numpy as np
 
 from autopilot.estimation import estimator as ekf
 from autopilot.estimation.estimator_params import HEIGHT_BARO
-from autopilot.estimation.sources import WAIT, Alignment, Source, register
+from autopilot.estimation.sources import WAIT, Alignment, Navigation, Source, register
 from simbridge.config import param
 from simbridge.frames import geodetic_to_local, ned_to_enu
 
 if TYPE_CHECKING:
-    from autopilot.estimation.navigation import Navigation
     from autopilot.estimation.sensors import Imu
     from autopilot.types import Step
 

@@ -9,13 +9,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from autopilot.estimation import estimator as ekf
-from autopilot.estimation.sources import SLOW_FUSION_EVERY, Source, register
+from autopilot.estimation.sources import SLOW_FUSION_EVERY, Navigation, Source, register
 from autopilot.estimation.sources.mocap import EV_YAW
 from autopilot.estimation.sources.mocap import LABEL as MOCAP
 from simbridge.config import param
 
 if TYPE_CHECKING:
-    from autopilot.estimation.navigation import Navigation
     from autopilot.estimation.sensors import Imu
     from autopilot.types import Step
 

@@ -10,12 +10,11 @@ import numpy as np
 from autopilot.estimation import estimator as ekf
 from autopilot.estimation.attitude import yaw_of
 from autopilot.estimation.estimator_params import HEIGHT_VISION
-from autopilot.estimation.sources import WAIT, Alignment, Source, register
+from autopilot.estimation.sources import WAIT, Alignment, Navigation, Source, register
 from simbridge.config import param
 from simbridge.frames import ned_to_enu, quat_ned_frd_to_enu_flu
 
 if TYPE_CHECKING:
-    from autopilot.estimation.navigation import Navigation
     from autopilot.estimation.sensors import Imu
     from autopilot.types import Step
 

@@ -7,12 +7,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from autopilot.estimation.estimator_params import HEIGHT_RANGE
-from autopilot.estimation.sensors import range_reading
-from autopilot.estimation.sources import Source, register
+from autopilot.estimation.sources import Navigation, Source, register
 from simbridge.config import param
 
 if TYPE_CHECKING:
-    from autopilot.estimation.navigation import Navigation
     from autopilot.estimation.sensors import Imu
     from autopilot.types import Step
 
@@ -39,6 +37,17 @@ class RangeParams:
 
     def sd_m(self, range_m: float) -> float:
         return self.rng_noise_m + self.rng_noise_per_m * range_m
+
+
+def range_reading(step: Step) -> float | None:
+    """The newest downward range: the flow deck's float metres, else DISTANCE_SENSOR's cm."""
+    if "HIL_OPTICAL_FLOW" in step.new and step.latest["HIL_OPTICAL_FLOW"]["distance"] > 0.0:
+        return float(step.latest["HIL_OPTICAL_FLOW"]["distance"])
+    if "DISTANCE_SENSOR" in step.new:
+        d = step.latest["DISTANCE_SENSOR"]
+        if d["min_distance"] <= d["current_distance"] <= d["max_distance"]:
+            return d["current_distance"] * 0.01
+    return None
 
 
 def fuse(nav: Navigation, step: Step, imu: Imu, s: RangeParams, t: float) -> None:
