@@ -100,9 +100,14 @@ def test_a_toy_sensor_declared_twice_is_sampled_at_its_rate_fused_and_tuned(tmp_
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tmp_path), env.get("PYTHONPATH")]))
     env["GROUNDFX_SIM_SENSORS"] = "toy_sim"
     env["GROUNDFX_AUTOPILOT_SENSORS"] = "toy_autopilot"
+    # the world file sets the toy's rate and noise by the names its declaration gives them
+    world = (REPO / "simbridge" / "worlds" / "default.yaml").read_text()
+    world += "sensors: {toy_velocity_hz: 25.0}\nsensor_noise: {toy_velocity_m_s: 0.02}\n"
+    (tmp_path / "toy_world.yaml").write_text(world)
     flight = subprocess.run(
         [
             sys.executable, "-m", "mission.cli", "fly", "mission/examples/low_hover.yaml",
+            "--world", str(tmp_path / "toy_world.yaml"),
             "--sensors", "toy",  # the command line offers the toy's sensor set
             "--param", "GFX_TOY_NOISE=0.1",  # refused unless in the parameter table
             "--no-record", "--json",
@@ -114,8 +119,8 @@ def test_a_toy_sensor_declared_twice_is_sampled_at_its_rate_fused_and_tuned(tmp_
     assert summary["landed"], summary.get("ended")
     fused = summary["estimator_fused"].get("toy velocity", 0)
     rejected = summary["estimator_rejected"].get("toy velocity", 0)
-    # sent at its declared 20 Hz (the flight aligns on its first step), read and fused
-    expected = 20.0 * summary["sim_s"]
+    # sent at the world's 25 Hz (the flight aligns on its first step), read and fused
+    expected = 25.0 * summary["sim_s"]
     assert 0.9 * expected <= fused + rejected <= expected + 2
     assert fused >= 0.9 * (fused + rejected)
     assert summary["estimator_fused"]["motion capture"] > 0  # the rest of the set flies on
