@@ -186,7 +186,7 @@ class HilEncoder:
 
     def tick(self, state: VehicleState, time_us: int) -> bytes:
         """HIL_SENSOR of one control step: the tick a lockstep autopilot answers (its control
-        path needs the IMU alone). The step's other sensors (drawn before it, as always) go
+        path needs the IMU alone). The step's other sensors (drawn before it) go
         with the truth in a second send (`truth`), packed while the autopilot computes its
         reply, off the lockstep's path; it reads them after its reply, for its fusions."""
         self._advance(state)

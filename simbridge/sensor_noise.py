@@ -107,7 +107,7 @@ class SensorErrors:
     The edge of the pure parameters above: one per simulated flight, advanced once per
     control step by the HIL encoder. Normals come from the seeded generator in blocks, as
     Python floats (a few values a message: numpy's per-call cost would dominate), in the
-    order one call per value would draw them: a seed gives the same errors as before.
+    order one call per value would draw them: a seed gives the same errors either way.
     """
 
     def __init__(self, noise: SensorNoise, period_s: float) -> None:

@@ -110,6 +110,7 @@ class Step:
 OBSTACLE_KINDS: dict[str, type] = {"box": Box, "wall": Wall, "step": Step}
 
 
+@dataclass(frozen=True)
 class _Rates:
     """Rates of the HIL messages besides HIL_SENSOR and HIL_STATE_QUATERNION (every step).
 
@@ -119,6 +120,21 @@ class _Rates:
     named by its `rate_key` (simbridge/sensors), its default the declared one.
     """
 
+    odometry_until_s: float | None = param(
+        None,
+        unit="s",
+        lo=0.0,
+        hi=1e6,
+        doc="motion capture stops at this simulated time (tracking lost); null: never",
+    )
+    truth_hz: float = param(
+        250.0,
+        unit="Hz",
+        lo=0.0,
+        hi=1000.0,
+        doc="DEBUG_VECT GE_TRUE, the true ground-effect force, for evaluation only",
+    )
+
     def rate_hz(self, sensor: str) -> float:
         """The rate of the declared sensor `sensor` (its declared one if this world's fields
         were made before it was declared)."""
@@ -127,39 +143,12 @@ class _Rates:
 
 
 def _rate_field(sensor: SimSensor) -> tuple[str, type, Any]:
-    doc = param(sensor.rate_hz, unit="Hz", lo=0.0, hi=1000.0, doc=sensor.doc)
-    return (sensor.rate_key, float, doc)
+    rate = param(sensor.rate_hz, unit="Hz", lo=0.0, hi=1000.0, doc=sensor.doc)
+    return (sensor.rate_key, float, rate)
 
 
 SensorRates = dataclasses.make_dataclass(
-    "SensorRates",
-    [_rate_field(sensor) for sensor in SENSORS.values()]
-    + [
-        (
-            "odometry_until_s",
-            float | None,
-            param(
-                None,
-                unit="s",
-                lo=0.0,
-                hi=1e6,
-                doc="motion capture stops at this simulated time (tracking lost); null: never",
-            ),
-        ),
-        (
-            "truth_hz",
-            float,
-            param(
-                250.0,
-                unit="Hz",
-                lo=0.0,
-                hi=1000.0,
-                doc="DEBUG_VECT GE_TRUE, the true ground-effect force, for evaluation only",
-            ),
-        ),
-    ],
-    bases=(_Rates,),
-    frozen=True,
+    "SensorRates", [_rate_field(s) for s in SENSORS.values()], bases=(_Rates,), frozen=True
 )
 SensorRates.__module__, SensorRates.__doc__ = __name__, _Rates.__doc__
 
