@@ -25,7 +25,10 @@ from autopilot.commander.mission_items import Geofence
 from autopilot.control.controller import ControllerParams
 from autopilot.control.ground_models import MODEL_NAMES
 from autopilot.control.land_detector import LandDetectorParams
+from autopilot.estimation.estimator_params import NAMES as ESTIMATOR_NAMES
 from autopilot.estimation.estimator_params import EstimatorParams
+from autopilot.estimation.sources import SOURCES
+from autopilot.estimation.sources import parameter_names as source_parameter_names
 from autopilot.identity import identity_defaults
 from learner.online.names import METHODS, method_number_doc, method_of_number
 from learner.online.settings import OnlineSettings, tuned_in_flight
@@ -63,6 +66,7 @@ GROUPS: dict[str, type] = {
     "online": OnlineSwitches,
     "online_settings": OnlineSettings,
     "estimator": EstimatorParams,
+    **{source.name: source.settings for source in SOURCES.values()},
     "land_detector": LandDetectorParams,
 }
 # MAVLink name -> (group, field)
@@ -104,27 +108,8 @@ NAMES: dict[str, tuple[str, str]] = {
     **{name: ("online_settings", field) for name, field in tuned_in_flight().items()},
     "GFX_OL_PAUSE": ("online", "pause"),
     "GFX_OL_RESET": ("online", "reset"),
-    "EKF2_EV_CTRL": ("estimator", "ev_ctrl"),
-    "EKF2_GPS_CTRL": ("estimator", "gps_ctrl"),
-    "EKF2_OF_CTRL": ("estimator", "of_ctrl"),
-    "EKF2_RNG_CTRL": ("estimator", "rng_ctrl"),
-    "EKF2_BARO_CTRL": ("estimator", "baro_ctrl"),
-    "EKF2_HGT_REF": ("estimator", "hgt_ref"),
-    "EKF2_MAG_DECL": ("estimator", "mag_decl_deg"),
-    "EKF2_EVP_NOISE": ("estimator", "ev_pos_noise_m"),
-    "EKF2_EVA_NOISE": ("estimator", "ev_att_noise_rad"),
-    "EKF2_RNG_NOISE": ("estimator", "rng_noise_m"),
-    "EKF2_RNG_SFE": ("estimator", "rng_noise_per_m"),
-    "EKF2_RNG_A_HMAX": ("estimator", "rng_aid_max_height_m"),
-    "EKF2_RNG_A_VMAX": ("estimator", "rng_aid_max_speed_m_s"),
-    "EKF2_OF_N_MIN": ("estimator", "of_noise_rad_s"),
-    "EKF2_GPS_P_NOISE": ("estimator", "gps_pos_noise_m"),
-    "EKF2_GPS_V_NOISE": ("estimator", "gps_vel_noise_m_s"),
-    "EKF2_BARO_NOISE": ("estimator", "baro_noise_m"),
-    "EKF2_HEAD_NOISE": ("estimator", "mag_noise_rad"),
-    "EKF2_GATE": ("estimator", "gate_sd"),
-    "COM_POS_FS_DELAY": ("estimator", "source_timeout_s"),
-    "GFX_EV_RESET_T": ("estimator", "ev_reset_s"),
+    **{name: ("estimator", field) for name, field in ESTIMATOR_NAMES.items()},
+    **source_parameter_names(),
     "GFX_LND_ALT": ("land_detector", "max_height_m"),
     "LNDMC_Z_VEL_MAX": ("land_detector", "max_climb_rate_m_s"),
     "GFX_LND_LOW_T": ("land_detector", "low_thrust"),
@@ -285,7 +270,9 @@ class ParamStore:
         return self.group("land_detector")
 
     def estimator(self) -> EstimatorParams:
-        return self.group("estimator")
+        """The estimator's parameters with each declared source's."""
+        sources = {name: self.group(name) for name in SOURCES}
+        return dataclasses.replace(self.group("estimator"), sources=sources)
 
     def online(self) -> OnlineSwitches:
         return self.group("online")

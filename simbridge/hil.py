@@ -1,26 +1,21 @@
 """The PX4 simulator protocol's messages: the vehicle state in, MAVLink bytes out.
 
-Simulator -> autopilot, per control step: HIL_STATE_QUATERNION and HIL_SENSOR; ODOMETRY (a
-motion-capture pose, float precision), DISTANCE_SENSOR (downward range, whole cm) with
-HIL_OPTICAL_FLOW (a flow deck: flow and the same range in float metres) and
-ESC_TELEMETRY_1_TO_4 (actual rotor speeds, so motor lag is observable) at their world-file
-rates; HIL_GPS at 10 Hz; HIL_SENSOR, the tick, first and alone in its send. Autopilot ->
-simulator, HIL_ACTUATOR_CONTROLS, is decoded in `actuator_controls`. With the true ground
-effect (DEBUG_VECT GE_TRUE) go the true position in floats (LOCAL_POSITION_NED) and the true
-height above the surface below (ALTITUDE's bottom_clearance), all for evaluation only.
-Units and frames (NED, FRD, degE7, mm, cm/s, mG, gauss, hPa) exist only here and in
-`frames`.
+Simulator -> autopilot, per control step: HIL_SENSOR (IMU, magnetometer, barometer), the tick,
+first and alone in its send; then the declared sensors (`simbridge.sensors`: motion capture,
+the flow deck's range and flow, ESC telemetry, GPS) at their world-file rates, and
+HIL_STATE_QUATERNION. Autopilot -> simulator, HIL_ACTUATOR_CONTROLS, is decoded in
+`actuator_controls`. With the true ground effect (DEBUG_VECT GE_TRUE) go the true position in
+floats (LOCAL_POSITION_NED) and the true height above the surface below (ALTITUDE's
+bottom_clearance), all for evaluation only. Units and frames (NED, FRD, degE7, mm, cm/s, mG,
+gauss, hPa) exist only here, in the sensors' modules and in `frames`.
 """
 
 from __future__ import annotations
 
 import math
-import os
 from collections import deque
 from collections.abc import Sequence
-
-os.environ.setdefault("MAVLINK20", "1")
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from typing import Any
 
 from simbridge.effects.sensor_errors import add, delay_periods, delay_steps
 from simbridge.frames import (
@@ -33,6 +28,8 @@ from simbridge.frames import (
     rotate_transposed,
 )
 from simbridge.sensor_noise import SensorErrors
+from simbridge.sensors import SENSORS, Frame, int16, mavlink
+from simbridge.sensors.esc import RAD_S_TO_RPM  # noqa: F401 (ESC telemetry's unit, for its readers)
 from simbridge.sim_state import VehicleState
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 from simbridge.wire import PacketSequence, WirePacker
@@ -42,9 +39,6 @@ SIM_SYSTEM_ID = 1
 SIM_COMPONENT_ID = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 # HIL_SENSOR.fields_updated: accelerometer, gyro, magnetometer, barometer (MAVLINK.md).
 FIELDS_UPDATED = 0x7 | 0x38 | 0x1C0 | 0x1A00
-Frame = tuple[WirePacker, tuple]  # a message's packer and its fields, packed later
-UNKNOWN_COVARIANCE = [math.nan] + [0.0] * 20
-RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
 TRUTH_NAME = b"GE_TRUE"  # DEBUG_VECT carrying the true ground-effect force
 
 
@@ -85,31 +79,18 @@ def _next_due(rate: float, step: int) -> float:
     return guess
 
 
-def _int16(v: float) -> int:
-    r = round(v)  # a comparison instead of min and max: six a step
-    return r if -32767 <= r <= 32767 else (32767 if r > 0 else -32767)
-
-
 class HilEncoder:
-    """Encodes each control step's sensors; keeps the sequence counter and the delay lines."""
+    """Encodes each control step's sensors; keeps the sequence counter and the delay lines.
+    The declared sensors (`simbridge.sensors`) sample through it (`SensorContext`)."""
 
     def __init__(self, world: World, vehicle: Vehicle) -> None:
         self.world, self.vehicle = world, vehicle
-        seq = PacketSequence()
-
-        def packer(cls: object) -> WirePacker:
-            return WirePacker(cls, SIM_SYSTEM_ID, SIM_COMPONENT_ID, seq)
-
-        self._pack_hil_state = packer(mavlink.MAVLink_hil_state_quaternion_message)
-        self._pack_hil_sensor = packer(mavlink.MAVLink_hil_sensor_message)
-        self._pack_odometry = packer(mavlink.MAVLink_odometry_message)
-        self._pack_distance = packer(mavlink.MAVLink_distance_sensor_message)
-        self._pack_esc = packer(mavlink.MAVLink_esc_telemetry_1_to_4_message)
-        self._pack_gps = packer(mavlink.MAVLink_hil_gps_message)
-        self._pack_flow = packer(mavlink.MAVLink_hil_optical_flow_message)
-        self._pack_debug = packer(mavlink.MAVLink_debug_vect_message)
-        self._pack_local = packer(mavlink.MAVLink_local_position_ned_message)
-        self._pack_altitude = packer(mavlink.MAVLink_altitude_message)
+        self._seq = PacketSequence()
+        self._pack_hil_state = self.packer(mavlink.MAVLink_hil_state_quaternion_message)
+        self._pack_hil_sensor = self.packer(mavlink.MAVLink_hil_sensor_message)
+        self._pack_debug = self.packer(mavlink.MAVLink_debug_vect_message)
+        self._pack_local = self.packer(mavlink.MAVLink_local_position_ned_message)
+        self._pack_altitude = self.packer(mavlink.MAVLink_altitude_message)
         fx = world.effects
         period = world.control_period_s
         # the IMU's delay in whole periods and the fraction of one beyond: its sample is then
@@ -118,50 +99,75 @@ class HilEncoder:
         self._imu_delay, self._imu_fraction = (
             delay_periods(fx.sensor_latency.imu_delay_s, period) if fx.sensor_latency else (0, 0.0)
         )
-        self._state_delay = (
+        self.state_delay = (
             delay_steps(fx.sensor_latency.state_delay_s, period) if fx.sensor_latency else 0
         )
-        noise = world.sensor_noise
-        self._errors = SensorErrors(noise, period)
-        # the motion-capture pose comes later than the state (the capture system's latency)
-        self._mocap_delay = self._state_delay + delay_steps(noise.mocap_latency_s, period)
-        self._history: deque[VehicleState] = deque(
-            maxlen=max(self._imu_delay + (self._imu_fraction > 0.0), self._mocap_delay) + 1
-        )
+        self.errors = SensorErrors(world.sensor_noise, period)
         bias = fx.sensor_bias
         zero = (0.0, 0.0, 0.0)
         self._accel_bias = bias.accel_bias_m_s2 if bias else zero
         self._gyro_bias = bias.gyro_bias_rad_s if bias else zero
         self._position_bias = bias.position_bias_m if bias else zero
         self._mag_enu = ned_to_enu(world.origin.magnetic_field_ned_gauss)
+        self._steps = 0
+        self.period_us = world.control_period_us
+        # each declared sensor's sampler, in the order their errors are drawn
+        self._samplers = [sensor.sampler(self) for sensor in SENSORS.values()]
+        self._history: deque[VehicleState] = deque(
+            maxlen=max(
+                self._imu_delay + (self._imu_fraction > 0.0),
+                self.state_delay,
+                *(sampler.history_steps for sampler in self._samplers),
+            )
+            + 1
+        )
         rates = world.sensors
-        # samples a step of each sensor with a clock of its own, in the order of `_schedule`:
-        # odometry, distance (range and flow), esc, gps, truth
+        # samples a step of each sensor with a clock of its own: the samplers', then the truth
         self._per_step = tuple(
             world.samples_per_step(hz)
-            for hz in (
-                rates.odometry_hz, rates.distance_sensor_hz, rates.esc_hz, rates.gps_hz,
-                rates.truth_hz,
-            )
-        )  # fmt: skip
+            for hz in [rates.rate_hz(name) for name in SENSORS] + [rates.truth_hz]
+        )
         # each one's next sampling step (-1: found at the first step), none for a sensor that
         # samples at every step (at least once a step)
         self._every_step = tuple(rate >= 1.0 for rate in self._per_step)
         self._due_steps = [math.inf if every else -1.0 for every in self._every_step]
         self._soonest_due = -1.0
-        self._due_now = (False,) * 5  # `_schedule` at the step being encoded
-        # the step of the last range-and-flow sample (the first integrates one nominal period)
-        per_step = self._per_step[1]
-        self._distance_step = -max(1, round(1.0 / per_step)) if per_step > 0.0 else 0
-        self._steps = 0
-        self._period_us = world.control_period_us
+        self._due_now = [False] * len(self._per_step)  # `_schedule` at the step being encoded
         self._rest: list[Frame] = []  # the tick's messages after HIL_SENSOR, packed later
 
-    def _schedule(self) -> tuple[bool, bool, bool, bool, bool]:
-        """Which sensors sample at this step (odometry, distance, esc, gps, truth): those
-        whose own clock began a period at it, so that each samples at its rate on average,
-        not at a rate rounded to a whole number of steps. A sensor's next such step is found
-        when its last one has passed (`_next_due`); asked once a step."""
+    # -- what a sensor's sampler reads (`simbridge.sensors.SensorContext`) -------------------
+
+    def packer(self, message_class: Any) -> WirePacker:
+        return WirePacker(message_class, SIM_SYSTEM_ID, SIM_COMPONENT_ID, self._seq)
+
+    @property
+    def steps(self) -> int:
+        return self._steps
+
+    def delayed(self, steps: int) -> VehicleState:
+        """The state `steps` control steps ago, or the oldest the delay line holds."""
+        hist = self._history
+        return hist[-1 - steps] if len(hist) > steps else hist[0]
+
+    def position(self, s: VehicleState) -> tuple[float, float, float]:
+        p = s.position_m
+        b = self._position_bias
+        return (p[0] + b[0], p[1] + b[1], p[2] + b[2])
+
+    def geodetic(self, position_m: tuple[float, float, float]) -> tuple[int, int, int]:
+        """degE7, degE7, mm above mean sea level of a local position."""
+        x, y, z = position_m
+        o = self.world.origin
+        lat, lon = local_to_geodetic(o.lat_deg, o.lon_deg, x, y)
+        return round(lat * 1e7), round(lon * 1e7), round(self._amsl_m(z) * 1000.0)
+
+    # -- one control step -------------------------------------------------------------------
+
+    def _schedule(self) -> list[bool]:
+        """Which sensors sample at this step (the samplers', then the truth): those whose own
+        clock began a period at it, so that each samples at its rate on average, not at a
+        rate rounded to a whole number of steps. A sensor's next such step is found when its
+        last one has passed (`_next_due`); asked once a step."""
         n = self._steps
         due = self._due_steps
         if n > self._soonest_due:
@@ -169,14 +175,7 @@ class HilEncoder:
                 if n > due[i]:
                     due[i] = _next_due(rate, n)
             self._soonest_due = min(due)
-        every = self._every_step
-        return (
-            every[0] or n == due[0],
-            every[1] or n == due[1],
-            every[2] or n == due[2],
-            every[3] or n == due[3],
-            every[4] or n == due[4],
-        )
+        return [every or n == d for every, d in zip(self._every_step, due, strict=True)]
 
     def encode(
         self, state: VehicleState, time_us: int, ground_effect_n: Vec3 | None = None
@@ -187,7 +186,7 @@ class HilEncoder:
 
     def tick(self, state: VehicleState, time_us: int) -> bytes:
         """HIL_SENSOR of one control step: the tick a lockstep autopilot answers (its control
-        path needs the IMU alone). The step's other sensors (drawn before it, as always) go
+        path needs the IMU alone). The step's other sensors (drawn before it) go
         with the truth in a second send (`truth`), packed while the autopilot computes its
         reply, off the lockstep's path; it reads them after its reply, for its fusions."""
         self._advance(state)
@@ -205,16 +204,10 @@ class HilEncoder:
 
     def _advance(self, state: VehicleState) -> None:
         self._history.append(state)
-        hist = self._history
-        n = len(hist)  # each delay line reads its delay back, or the oldest it holds
-        d = self._imu_delay
-        self._imu_state = hist[-1 - d] if n > d else hist[0]
-        d = self._state_delay
-        self._nav_state = hist[-1 - d] if n > d else hist[0]
-        d = self._mocap_delay
-        self._mocap_state = hist[-1 - d] if n > d else hist[0]
+        self._imu_state = self.delayed(self._imu_delay)
+        self._nav_state = self.delayed(self.state_delay)
         self._due_now = self._schedule()
-        self._truth_due = self._due_now[4]
+        self._truth_due = self._due_now[-1]
 
     def _truth_bytes(self, time_us: int, ge: Vec3 | None) -> bytes:
         nav = self._nav_state
@@ -239,22 +232,12 @@ class HilEncoder:
         return b"".join(parts)
 
     def _tick_bytes(self, time_us: int) -> bytes:
-        nav = self._nav_state
         rest = self._rest
-        until_s = self.world.sensors.odometry_until_s
-        odometry, distance, esc, gps, _ = self._due_now
-        if odometry and (until_s is None or time_us < until_s * 1e6):
-            rest.append(self._odometry(self._mocap_state, time_us))
-        if distance:
-            range_m = self._errors.range_m(nav.range_m)
-            rest.append(self._distance(range_m, time_us))
-            rest.append(self._flow(nav, range_m, time_us))
-        if esc:
-            rest.append(self._esc(self._history[-1]))  # the rotors now: no delay line
-        if gps:
-            rest.append(self._gps(nav, time_us))
-        # computed last, as it always was (the sensor errors are drawn in this order: a seed
-        # gives the same flight), packed and sent first; the others are packed with the truth
+        for sampler, due in zip(self._samplers, self._due_now, strict=False):
+            if due:
+                rest.extend(sampler(time_us))
+        # computed last (the sensor errors are drawn in this order: a seed gives one flight),
+        # packed and sent first; the others are packed with the truth
         self._steps += 1
         return self._hil_sensor(self._imu_state, time_us)
 
@@ -273,7 +256,7 @@ class HilEncoder:
             old_force, old_rates = _imu_sample(old, old.rotation)
             specific_force = _blend(specific_force, old_force, f)
             rates = _blend(rates, old_rates, f)
-        errors = self._errors
+        errors = self.errors
         specific_force, rates = errors.imu(
             add(specific_force, self._accel_bias), add(rates, self._gyro_bias)
         )
@@ -303,20 +286,8 @@ class HilEncoder:
             0,
         )
 
-    def _position(self, s: VehicleState) -> tuple[float, float, float]:
-        p = s.position_m
-        b = self._position_bias
-        return (p[0] + b[0], p[1] + b[1], p[2] + b[2])
-
-    def _geodetic(self, position_m: tuple[float, float, float]) -> tuple[int, int, int]:
-        """degE7, degE7, mm above mean sea level of a local position."""
-        x, y, z = position_m
-        o = self.world.origin
-        lat, lon = local_to_geodetic(o.lat_deg, o.lon_deg, x, y)
-        return round(lat * 1e7), round(lon * 1e7), round(self._amsl_m(z) * 1000.0)
-
     def _hil_state(self, s: VehicleState, time_us: int) -> bytes:
-        lat, lon, alt = self._geodetic(self._position(s))
+        lat, lon, alt = self.geodetic(self.position(s))
         v = enu_to_ned(s.velocity_m_s)
         rates = flu_to_frd(s.angular_velocity_body_rad_s)
         # xacc..zacc: the true kinematic acceleration in body FRD (as Gazebo reports it), mG.
@@ -332,136 +303,12 @@ class HilEncoder:
             lat,
             lon,
             alt,
-            _int16(100 * v[0]),
-            _int16(100 * v[1]),
-            _int16(100 * v[2]),
+            int16(100 * v[0]),
+            int16(100 * v[1]),
+            int16(100 * v[2]),
             speed_cm_s,
             speed_cm_s,
-            _int16(acc[0] * to_mg),
-            _int16(acc[1] * to_mg),
-            _int16(acc[2] * to_mg),
-        )
-
-    def _odometry(self, s: VehicleState, time_us: int) -> Frame:
-        """A motion-capture pose, stamped with its capture time (it arrives `mocap_latency_s`
-        late). Velocities are NaN (not measured) unless the sensors are ideal."""
-        errors = self._errors
-        p = enu_to_ned(errors.vector(self._position(s), errors.noise.mocap_position_m))
-        q = quat_enu_flu_to_ned_frd(errors.attitude(s.quaternion))
-        if errors.ideal:
-            v_body = flu_to_frd(rotate_transposed(s.rotation, s.velocity_m_s))
-            rates = flu_to_frd(s.angular_velocity_body_rad_s)
-        else:
-            v_body = rates = (math.nan, math.nan, math.nan)
-        captured_us = time_us - (self._mocap_delay - self._state_delay) * self._period_us
-        return self._pack_odometry, (
-            max(0, captured_us),
-            mavlink.MAV_FRAME_LOCAL_NED,
-            mavlink.MAV_FRAME_BODY_FRD,
-            p[0],
-            p[1],
-            p[2],
-            list(q),
-            v_body[0],
-            v_body[1],
-            v_body[2],
-            rates[0],
-            rates[1],
-            rates[2],
-            UNKNOWN_COVARIANCE,
-            UNKNOWN_COVARIANCE,
-            0,
-            mavlink.MAV_ESTIMATOR_TYPE_MOCAP,
-            100,
-        )
-
-    def _distance(self, range_m: float, time_us: int) -> Frame:
-        max_cm = round(self.vehicle.range_sensor_max_m * 100.0)
-        # MAVLink: max_distance + 1 means nothing in range.
-        current = max_cm + 1 if range_m == math.inf else min(max_cm, round(range_m * 100.0))
-        return self._pack_distance, (
-            time_us // 1000,
-            1,
-            max_cm,
-            current,
-            mavlink.MAV_DISTANCE_SENSOR_LASER,
-            0,
-            mavlink.MAV_SENSOR_ROTATION_PITCH_270,
-            0,
-            0.0,
-            0.0,
-            (0.0, 0.0, 0.0, 0.0),
-            0,
-        )
-
-    def _flow(self, s: VehicleState, range_m: float, time_us: int) -> Frame:
-        """A downward flow-and-range deck (Crazyflie flow deck): the range in float metres.
-
-        Flow is integrated over the message interval from the current rates and velocity
-        (sensor frame = body FRD): x = (p - v_y / h) dt, y = (q + v_x / h) dt.
-        """
-        # integrated since the last sample (at a rate that is no whole number of steps, the
-        # interval alternates)
-        steps = max(1, self._steps - self._distance_step)
-        self._distance_step = self._steps
-        dt = steps * self.world.control_period_s
-        rates = flu_to_frd(s.angular_velocity_body_rad_s)
-        v = flu_to_frd(rotate_transposed(s.rotation, s.velocity_m_s))
-        h = s.range_m
-        known = math.isfinite(h) and h > 0.0
-        flow_sd = self._errors.noise.flow_noise_rad
-        flow_x = self._errors.scalar((rates[0] - v[1] / h) * dt, flow_sd) if known else 0.0
-        flow_y = self._errors.scalar((rates[1] + v[0] / h) * dt, flow_sd) if known else 0.0
-        h = range_m
-        return self._pack_flow, (
-            time_us,
-            0,
-            round(dt * 1e6),
-            flow_x,
-            flow_y,
-            rates[0] * dt,
-            rates[1] * dt,
-            rates[2] * dt,
-            2000,
-            255 if known else 0,
-            0,
-            h if known else -1.0,
-        )
-
-    def _esc(self, s: VehicleState) -> Frame:
-        rpm = [min(65535, round(n * RAD_S_TO_RPM)) for n in s.rotor_speeds_rad_s]
-        count = self._steps & 0xFFFF
-        return self._pack_esc, ([0] * 4, [0] * 4, [0] * 4, [0] * 4, rpm, [count] * 4)
-
-    def _gps(self, s: VehicleState, time_us: int) -> Frame:
-        n, errors = self._errors.noise, self._errors
-        x, y, z = self._position(s)
-        lat, lon, alt = self._geodetic((
-            errors.scalar(x, n.gps_horizontal_m),
-            errors.scalar(y, n.gps_horizontal_m),
-            errors.scalar(z, n.gps_vertical_m),
-        ))  # fmt: skip
-        vn, ve, vd = enu_to_ned(errors.vector(s.velocity_m_s, n.gps_velocity_m_s))
-        ground = math.hypot(vn, ve)
-        cog = (
-            round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0) % 36000
-            if ground > 0.05
-            else 65535
-        )
-        return self._pack_gps, (
-            time_us,
-            3,
-            lat,
-            lon,
-            alt,
-            100,
-            100,
-            min(65535, round(ground * 100.0)),
-            _int16(vn * 100),
-            _int16(ve * 100),
-            _int16(vd * 100),
-            cog,
-            12,
-            0,
-            0,
+            int16(acc[0] * to_mg),
+            int16(acc[1] * to_mg),
+            int16(acc[2] * to_mg),
         )

@@ -2,7 +2,9 @@
 
 The simulator reports what a nano quadrotor's sensors would measure, not the truth. Each
 figure is settable in the world file (`sensor_noise:`); `SensorNoise.ideal()` (the
-`--ideal-sensors` flag) turns every error off, which is how flights were simulated before.
+`--ideal-sensors` flag) turns every error off: the truth, on time. The IMU's, magnetometer's
+and barometer's figures are here; each other sensor declares its own with it
+(`simbridge.sensors`), and `SensorNoise` holds them all.
 
 Sources of the defaults:
 - IMU, a Bosch BMI088 (the Crazyflie 2.1's): accelerometer noise density 175 ug/sqrt(Hz)
@@ -12,13 +14,6 @@ Sources of the defaults:
   1e-4 m/s^2/sqrt(s) and 1e-5 rad/s/sqrt(s) (bias instability of a few deg/h).
 - Magnetometer (BMM150 class): 3 mG white noise. Barometer (BMP388): 1 Pa white noise at
   the vehicle (datasheet RMS noise 0.03 Pa; propeller wash dominates in flight).
-- Range, a ST VL53L1x (Crazyflie flow deck v2): 2.5 mm standard deviation at short range,
-  growing 1 % per metre, the Crazyflie firmware's measurement model.
-- Optical flow, a PixArt PMW3901: 2 pixels per measurement (the Crazyflie firmware's
-  flowStdFixed) at 4.2 deg / 35 pixels: 2.1e-3 rad of integrated flow.
-- Motion capture (Vicon/OptiTrack class, as indoor nano drones fly): 1 mm and 0.1 deg,
-  100 Hz, about 10 ms latency (sent by `simbridge.world.SensorRates.odometry_hz`).
-- GPS (u-blox M8 class): 0.5 m horizontal and 0.8 m vertical white noise, 0.1 m/s velocity.
 
 Noise is drawn from a seeded generator: a world file and a seed give the same flight.
 """
@@ -27,17 +22,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from simbridge.config import param
+from simbridge.sensors import SENSORS
 
 Vec3 = tuple[float, float, float]
 
 
 @dataclass(frozen=True)
-class SensorNoise:
+class ImuNoise:
+    """The seed and the figures of the sensors in HIL_SENSOR."""
+
     seed: int = param(1, lo=0, hi=2**31 - 1, doc="seed of every sensor error of the flight")
     accel_noise_density: float = param(
         1.7e-3, unit="m/s^2/sqrt(Hz)", lo=0.0, hi=1.0, doc="accelerometer white noise (BMI088)"
@@ -59,33 +59,38 @@ class SensorNoise:
     )
     mag_noise_gauss: float = param(0.003, unit="gauss", lo=0.0, hi=1.0, doc="white noise")
     baro_noise_hpa: float = param(0.01, unit="hPa", lo=0.0, hi=10.0, doc="white noise")
-    range_noise_m: float = param(
-        0.0025, unit="m", lo=0.0, hi=1.0, doc="range standard deviation at short range"
-    )
-    range_noise_per_m: float = param(
-        0.01, unit="1", lo=0.0, hi=1.0, doc="added range standard deviation per metre"
-    )
-    flow_noise_rad: float = param(
-        2.1e-3, unit="rad", lo=0.0, hi=1.0, doc="integrated optical flow per measurement"
-    )
-    mocap_position_m: float = param(0.001, unit="m", lo=0.0, hi=1.0, doc="per axis")
-    mocap_attitude_rad: float = param(0.0017, unit="rad", lo=0.0, hi=1.0, doc="per axis")
-    mocap_latency_s: float = param(
-        0.012, unit="s", lo=0.0, hi=1.0, doc="delay of the motion-capture pose (whole periods)"
-    )
-    gps_horizontal_m: float = param(0.5, unit="m", lo=0.0, hi=100.0, doc="per axis")
-    gps_vertical_m: float = param(0.8, unit="m", lo=0.0, hi=100.0, doc="altitude")
-    gps_velocity_m_s: float = param(0.1, unit="m/s", lo=0.0, hi=10.0, doc="per axis")
 
-    @staticmethod
-    def ideal() -> SensorNoise:
+    @classmethod
+    def ideal(cls) -> Any:
         """Every error off: the sensors report the truth, on time."""
-        zeros = {f.name: 0.0 for f in dataclasses.fields(SensorNoise) if f.name != "seed"}
-        return SensorNoise(**zeros)
+        return cls(**{f.name: 0.0 for f in dataclasses.fields(cls) if f.name != "seed"})
 
     @property
     def is_ideal(self) -> bool:
-        return self == SensorNoise.ideal()
+        return self == self.ideal()
+
+
+def _noise_fields() -> list[tuple[str, Any, Any]]:
+    """Each declared sensor's error figures, as fields of `SensorNoise`."""
+    fields: list[tuple[str, Any, Any]] = []
+    for sensor in SENSORS.values():
+        if sensor.noise is None:
+            continue
+        hints = typing.get_type_hints(sensor.noise)
+        for f in dataclasses.fields(sensor.noise):
+            field = dataclasses.field(default=f.default, metadata=f.metadata)
+            fields.append((f.name, hints[f.name], field))
+    names = [name for name, _, _ in fields] + [f.name for f in dataclasses.fields(ImuNoise)]
+    if len(set(names)) < len(names):
+        raise ValueError(f"sensor noise fields declared twice: {sorted(names)}")
+    return fields
+
+
+SensorNoise = dataclasses.make_dataclass(
+    "SensorNoise", _noise_fields(), bases=(ImuNoise,), frozen=True
+)
+SensorNoise.__module__ = __name__
+SensorNoise.__doc__ = "Every sensor's error figures (the world file's `sensor_noise:`)."
 
 
 def white_sd(noise_density: float, period_s: float) -> float:
@@ -102,7 +107,7 @@ class SensorErrors:
     The edge of the pure parameters above: one per simulated flight, advanced once per
     control step by the HIL encoder. Normals come from the seeded generator in blocks, as
     Python floats (a few values a message: numpy's per-call cost would dominate), in the
-    order one call per value would draw them: a seed gives the same errors as before.
+    order one call per value would draw them: a seed gives the same errors either way.
     """
 
     def __init__(self, noise: SensorNoise, period_s: float) -> None:
@@ -178,15 +183,10 @@ class SensorErrors:
     def scalar(self, value: float, sd: float) -> float:
         return value + sd * self._normal() if sd > 0.0 else value
 
-    def range_m(self, range_m: float) -> float:
-        n = self.noise
-        if not math.isfinite(range_m):
-            return range_m
-        return max(0.0, self.scalar(range_m, n.range_noise_m + n.range_noise_per_m * range_m))
-
-    def attitude(self, quaternion: tuple[float, float, float, float]) -> tuple[float, ...]:
-        """The quaternion turned by a small random rotation (mocap attitude noise)."""
-        sd = self.noise.mocap_attitude_rad
+    def attitude(
+        self, quaternion: tuple[float, float, float, float], sd: float
+    ) -> tuple[float, ...]:
+        """The quaternion turned by a small random rotation, `sd` rad per axis."""
         if sd <= 0.0:
             return quaternion
         e0, e1, e2 = self._vector3(sd)

@@ -14,6 +14,7 @@ from typing import Any
 from simbridge.config import ConfigError, build, load_yaml, param, resolve_packaged
 from simbridge.effects import EffectSet, parse_effects
 from simbridge.sensor_noise import SensorNoise
+from simbridge.sensors import SENSORS, SimSensor
 
 WORLDS_DIR = Path(__file__).parent / "worlds"
 Vec3 = tuple[float, float, float]
@@ -110,25 +111,15 @@ OBSTACLE_KINDS: dict[str, type] = {"box": Box, "wall": Wall, "step": Step}
 
 
 @dataclass(frozen=True)
-class SensorRates:
+class _Rates:
     """Rates of the HIL messages besides HIL_SENSOR and HIL_STATE_QUATERNION (every step).
 
     A sensor samples on the first control step of each of its own periods, so its mean rate is
     the one given (100 Hz at a 250 Hz control rate: every 2nd and 3rd step in turn); rates
-    above the control rate give a message every step.
+    above the control rate give a message every step. A declared sensor's rate is a field
+    named by its `rate_key` (simbridge/sensors), its default the declared one.
     """
 
-    gps_hz: float = param(10.0, unit="Hz", lo=0.0, hi=1000.0, doc="HIL_GPS; 0 disables")
-    odometry_hz: float = param(
-        100.0,
-        unit="Hz",
-        lo=0.0,
-        hi=1000.0,
-        doc="ODOMETRY, a motion-capture pose in floats (a mocap system at 100 Hz); 0: off",
-    )
-    distance_sensor_hz: float = param(
-        50.0, unit="Hz", lo=0.0, hi=1000.0, doc="DISTANCE_SENSOR (a VL53L1x ranges at 50 Hz)"
-    )
     odometry_until_s: float | None = param(
         None,
         unit="s",
@@ -136,7 +127,6 @@ class SensorRates:
         hi=1e6,
         doc="motion capture stops at this simulated time (tracking lost); null: never",
     )
-    esc_hz: float = param(125.0, unit="Hz", lo=0.0, hi=1000.0, doc="ESC_TELEMETRY_1_TO_4")
     truth_hz: float = param(
         250.0,
         unit="Hz",
@@ -144,6 +134,23 @@ class SensorRates:
         hi=1000.0,
         doc="DEBUG_VECT GE_TRUE, the true ground-effect force, for evaluation only",
     )
+
+    def rate_hz(self, sensor: str) -> float:
+        """The rate of the declared sensor `sensor` (its declared one if this world's fields
+        were made before it was declared)."""
+        declared = SENSORS[sensor]
+        return getattr(self, declared.rate_key, declared.rate_hz)
+
+
+def _rate_field(sensor: SimSensor) -> tuple[str, type, Any]:
+    rate = param(sensor.rate_hz, unit="Hz", lo=0.0, hi=1000.0, doc=sensor.doc)
+    return (sensor.rate_key, float, rate)
+
+
+SensorRates = dataclasses.make_dataclass(
+    "SensorRates", [_rate_field(s) for s in SENSORS.values()], bases=(_Rates,), frozen=True
+)
+SensorRates.__module__, SensorRates.__doc__ = __name__, _Rates.__doc__
 
 
 @dataclass(frozen=True)
@@ -162,7 +169,7 @@ class World:
     obstacles: tuple[Box, ...] = ()
     sensors: SensorRates = param(SensorRates(), doc="HIL message rates")
     sensor_noise: SensorNoise = param(
-        SensorNoise(), doc="sensor errors (simbridge/sensor_noise.py gives the sources)"
+        SensorNoise(), doc="sensor errors (sources: simbridge/sensor_noise.py, simbridge/sensors)"
     )
     effects: EffectSet = EffectSet()
 

@@ -19,6 +19,7 @@ from autopilot.estimation.attitude import (
 )
 from autopilot.types import FlightMode
 from simbridge.sensor_noise import SensorErrors, SensorNoise
+from simbridge.sensors.distance import measured_range_m
 from simbridge.vehicle import GRAVITY_M_S2
 
 LEVEL = np.array([1.0, 0.0, 0.0, 0.0])
@@ -189,4 +190,4 @@ def test_simulated_imu_noise_has_the_datasheet_density_and_a_seeded_bias():
     assert np.all(np.abs(same.accel_bias) < 5 * noise.accel_bias_sd_m_s2)
     ideal = SensorErrors(SensorNoise.ideal(), period)
     assert ideal.imu((0.1, 0.2, 9.81), (0.01, 0.0, 0.0)) == ((0.1, 0.2, 9.81), (0.01, 0.0, 0.0))
-    assert ideal.range_m(0.5) == 0.5
+    assert measured_range_m(ideal, 0.5) == 0.5

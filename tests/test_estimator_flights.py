@@ -20,9 +20,9 @@ RHO2 = [{"name": "ground_effect", "rho": 2.0}]
 
 
 def sensors(name: str) -> list[str]:
-    from autopilot.estimation.estimator_params import SENSOR_SETS
+    from autopilot.estimation.sources import sensor_sets
 
-    return [a for k, v in SENSOR_SETS[name].items() for a in ("--param", f"{k}={v}")]
+    return [a for k, v in sensor_sets()[name].items() for a in ("--param", f"{k}={v}")]
 
 
 @pytest.mark.parametrize(

@@ -4,45 +4,44 @@ The control path reads only what this module estimates from the sensors (HIL_SEN
 magnetometer and barometer; ODOMETRY from motion capture; HIL_GPS; the downward range and
 HIL_OPTICAL_FLOW). HIL_STATE_QUATERNION, the simulator's truth, is never read here.
 
-Which sensors correct the filter is chosen by parameters named as PX4's EKF2 names them
-(`autopilot.estimation.estimator_params`). The height reference (EKF2_HGT_REF) falls back, when its
-source goes quiet, to the next available of range, barometer, GPS. A downward range reading also
-feeds a one-state terrain estimate (PX4's terrain estimator), so the height above the surface below
-(the ground-effect model's input) is the estimated altitude minus the terrain's.
+The sources that correct the filter are declared in `autopilot.estimation.sources` (each with
+its parameters, named as PX4's EKF2 names them, and its fusion) and fuse in their declared
+order. The height reference (EKF2_HGT_REF, `autopilot.estimation.estimator_params`) falls
+back, when its source goes quiet, to the next available of range, barometer, GPS. A downward
+range reading also feeds a one-state terrain estimate (PX4's terrain estimator), so the height
+above the surface below (the ground-effect model's input) is the estimated altitude minus the
+terrain's.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from autopilot.estimation import estimator as ekf
-from autopilot.estimation.attitude import attitude_from_gravity_and_field, yaw_of
-from autopilot.estimation.estimator_params import (
-    EV_HPOS,
-    EV_VPOS,
-    EV_YAW,
-    GPS_ALT,
-    GPS_POS,
-    GPS_VEL,
-    HEIGHT_BARO,
-    HEIGHT_NAMES,
-    EstimatorParams,
-)
+from autopilot.estimation.attitude import attitude_from_gravity_and_field
+from autopilot.estimation.estimator_params import HEIGHT_BARO, HEIGHT_NAMES, EstimatorParams
 from autopilot.estimation.nav_history import PredictionHistory
-from autopilot.estimation.sensors import Imu, imu_from, pressure_altitude_m, range_reading
+from autopilot.estimation.sensors import Imu, imu_from, pressure_altitude_m
+from autopilot.estimation.sources import SLOW_FUSION_EVERY, SOURCES, WAIT, Alignment
+from autopilot.estimation.sources.gps import GPS_ALT
+from autopilot.estimation.sources.gps import LABEL as GPS
+from autopilot.estimation.sources.mocap import EV_VPOS
+from autopilot.estimation.sources.mocap import LABEL as MOCAP
+from autopilot.estimation.sources.range import LABEL as RANGE
 from autopilot.estimation.terrain import Terrain, terrain_update
 from autopilot.types import FlightState, Step
-from simbridge.frames import Vec3, geodetic_to_local, ned_to_enu, quat_ned_frd_to_enu_flu
+from simbridge.frames import Vec3
 
 RESTING_SD_M = 0.0005  # how well a standing vehicle knows the surface under it
 BARO_REF_STEPS = 250.0  # the barometer's reference averages its offset over about a second
 # the covariance's prediction step (PX4's EKF2: 10 ms); a fusion between two uses the last
 # prediction's covariance, short of at most this much process noise
 COVARIANCE_PERIOD_S = 0.01
-SLOW_FUSION_EVERY = 5  # heading, barometer, rest: every fifth control step (50 Hz)
 HISTORY_STEPS = 64  # 0.26 s at 250 Hz: the oldest delayed measurement that can be fused
 
 
@@ -83,7 +82,8 @@ class Navigation:
         self._pending_f: Vec3 = (0.0, 0.0, 0.0)
         self._pending_w: Vec3 = (0.0, 0.0, 0.0)
         self._last_seen: dict[str, float] = {}
-        self._mocap_fused_s: float | None = None  # the last pose that passed the gate
+        self.memory: dict[str, Any] = {}  # what the sources keep from step to step
+        self.range_m: float | None = None  # the step's downward range (the range source's)
         self.terrain = Terrain()
         self._baro_ref_m: float | None = None
         self._standing = False  # resting() was told this step
@@ -133,14 +133,41 @@ class Navigation:
         """Why the horizontal position is no longer measured (a configured position source
         went quiet), or None."""
         timeout = self.params.source_timeout_s
-        for name, wanted in (
-            ("motion capture", self.params.ev_ctrl & EV_HPOS),
-            ("GPS", self.params.gps_ctrl & GPS_POS),
-        ):
-            seen = self._last_seen.get(name)
+        for source in SOURCES.values():
+            seen = self._last_seen.get(source.label)
+            wanted = source.gives_position(self.settings(source.name))
             if wanted and seen is not None and t - seen > timeout:
-                return f"{name} lost"
+                return f"{source.label} lost"
         return None
+
+    # -- what the sources use (`autopilot.estimation.sources`) -----------------------------
+
+    def settings(self, source: str) -> Any:
+        """The parameters of the declared source `source`."""
+        settings = self.params.sources.get(source)
+        return settings if settings is not None else _declared_defaults(source)
+
+    @property
+    def steps(self) -> int:
+        """Control steps corrected since the alignment."""
+        return self._steps
+
+    def seen(self, label: str, t: float) -> None:
+        """The source `label` spoke at `t` (it is lost after the sources' timeout)."""
+        self._last_seen[label] = t
+
+    def alive(self, label: str, t: float) -> bool:
+        return t - self._last_seen.get(label, -math.inf) <= self.params.source_timeout_s
+
+    def at_capture(self, time_us: int) -> tuple[Any, Any]:
+        """The filter's position and attitude when a measurement was captured."""
+        return self._history.at_capture(self.estimate, time_us)
+
+    def fuse(self, source: str, fused: ekf.Fused) -> bool:
+        """Takes a correction's result, counted under `source`; True if it was accepted."""
+        self.quality.note(source, fused)
+        self.estimate = fused.estimate
+        return fused.accepted
 
     # -- one control step ------------------------------------------------------------------
 
@@ -179,32 +206,10 @@ class Navigation:
         # what the prediction moved and turned, for measurements captured in the past
         self._history.advance(before, predicted, dt, imu.time_us)
         t = imu.time_us * 1e-6
-        p = self.params
-        if p.ev_ctrl and "ODOMETRY" in step.new:
-            self._fuse_mocap(step.latest["ODOMETRY"], t)
-        if p.gps_ctrl and "HIL_GPS" in step.new:
-            self._fuse_gps(step.latest["HIL_GPS"], t)
-        range_m = range_reading(step)
-        if range_m is not None:
-            self._last_seen["range"] = t
-        if (
-            self._steps % SLOW_FUSION_EVERY == 0
-            and not (p.ev_ctrl & EV_YAW and self._alive("motion capture", t))
-            and any(imu.field)
-        ):
-            self._fuse("heading", ekf.fuse_heading(
-                self.estimate, np.array(imu.field), self._field_world(), p.mag_noise_rad, p.gate_sd
-            ))  # fmt: skip
-        if (
-            p.of_ctrl
-            and "HIL_OPTICAL_FLOW" in step.new
-            and not (p.ev_ctrl & EV_HPOS and self._alive("motion capture", t))
-        ):
-            self._fuse_flow(step.latest["HIL_OPTICAL_FLOW"], imu, t)
-        self._fuse_height(imu, range_m, t)
-
-    def _alive(self, source: str, t: float) -> bool:
-        return t - self._last_seen.get(source, -math.inf) <= self.params.source_timeout_s
+        self.range_m = None
+        for source in SOURCES.values():
+            source.fuse(self, step, imu, self.settings(source.name), t)
+        self._fuse_height(imu, self.range_m, t)
 
     def _sync(self) -> None:
         """The covariance brought up to the present state's time."""
@@ -224,44 +229,36 @@ class Navigation:
         self._pending_f = (0.0, 0.0, 0.0)
         self._pending_w = (0.0, 0.0, 0.0)
 
-    def _fuse(self, source: str, fused: ekf.Fused) -> bool:
-        self.quality.note(source, fused)
-        self.estimate = fused.estimate
-        return fused.accepted
-
-    def _field_world(self) -> np.ndarray:
-        d = math.radians(self.params.mag_decl_deg)
-        return np.array([math.sin(d), math.cos(d), 0.0])
-
     # -- initial alignment --------------------------------------------------------------------
 
     def _initialise(self, step: Step, imu: Imu) -> None:
-        p = self.params
-        mocap = step.latest.get("ODOMETRY") if p.ev_ctrl else None
-        gps = step.latest.get("HIL_GPS") if p.gps_ctrl & GPS_POS else None
-        if p.ev_ctrl and mocap is None:
-            return  # wait for the first pose
-        if p.gps_ctrl & GPS_POS and gps is None:
-            return
-        if mocap is not None and p.ev_ctrl & EV_YAW:
-            q = np.array(quat_ned_frd_to_enu_flu(tuple(mocap["q"])))
-            attitude_sd = p.ev_att_noise_rad
+        aligned: list[tuple[str, Alignment]] = []
+        for source in SOURCES.values():
+            if source.align is not None:
+                alignment = source.align(self, step, imu, self.settings(source.name))
+                if alignment is WAIT:
+                    return  # a source that is on has not spoken yet
+                if alignment is not None:
+                    aligned.append((source.label, alignment))
+        positions = [a for _, a in aligned if a.position_m is not None]
+        attitudes = [a for _, a in aligned if a.quaternion is not None]
+        if attitudes:
+            q = np.array(attitudes[0].quaternion)
+            attitude_sd = attitudes[0].attitude_sd_rad
         else:
             q = attitude_from_gravity_and_field(
-                np.array(imu.specific_force), np.array(imu.field), self._field_world()
+                np.array(imu.specific_force),
+                np.array(imu.field),
+                self.settings("magnetometer").field_world(),
             )
             attitude_sd = 0.05
-        if mocap is not None:
-            self._last_seen["motion capture"] = imu.time_us * 1e-6
-            position = np.array(ned_to_enu((mocap["x"], mocap["y"], mocap["z"])))
-            position_sd = p.ev_pos_noise_m
-        elif gps is not None:
-            # horizontally where the fix says; vertically the vehicle stands on the ground
-            # (a fix's altitude errs by metres; PX4's local frame starts at its height too)
-            east, north, _ = self._gps_position(gps)
-            position = np.array([east, north, self.resting_height_m])
-            position_sd = p.gps_pos_noise_m
-        else:  # flow: the local frame starts where the vehicle stands
+        for label, alignment in aligned:
+            if alignment.seen:
+                self.seen(label, imu.time_us * 1e-6)
+        if positions:
+            position = np.array(positions[0].position_m)
+            position_sd = positions[0].position_sd_m
+        else:  # the local frame starts where the vehicle stands
             position = np.array([0.0, 0.0, self.resting_height_m])
             position_sd = 0.01
         self.estimate = ekf.initial(imu.time_us, position, q, position_sd, attitude_sd)
@@ -273,117 +270,32 @@ class Navigation:
         )
 
     def sources(self) -> list[str]:
+        names = [
+            source.label
+            for source in SOURCES.values()
+            if source.active(self, self.settings(source.name))
+        ]
         p = self.params
-        names = []
-        if p.ev_ctrl:
-            names.append("motion capture")
-        if p.gps_ctrl:
-            names.append("GPS")
-        if p.of_ctrl:
-            names.append("optical flow")
-        if p.rng_ctrl:
-            names.append("range")
         if p.baro_ctrl and p.hgt_ref == HEIGHT_BARO:
             names.append("barometer")
-        if not p.ev_ctrl & EV_YAW:
-            names.append("magnetometer")
         return names
-
-    # -- the sources ---------------------------------------------------------------------------
-
-    def _fuse_mocap(self, m: dict, t: float) -> None:
-        p = self.params
-        self._last_seen["motion capture"] = t
-        position, attitude = self._history.at_capture(self.estimate, m["time_usec"])
-        measured = ned_to_enu((m["x"], m["y"], m["z"]))
-        axes = ([0, 1] if p.ev_ctrl & EV_HPOS else []) + (
-            [2] if p.ev_ctrl & EV_VPOS and self.height_source == "vision" else []
-        )
-        yaw = None
-        if p.ev_ctrl & EV_YAW:
-            yaw = yaw_of(quat_ned_frd_to_enu_flu(tuple(m["q"]))) - yaw_of(attitude)
-        if axes or yaw is not None:
-            innovation = np.array([measured[a] - position[a] for a in axes])
-            fused = ekf.fuse_pose(
-                self.estimate, innovation, axes, p.ev_pos_noise_m, yaw, p.ev_att_noise_rad,
-                p.gate_sd,
-            )  # fmt: skip
-            if self._fuse("motion capture", fused) or self._mocap_fused_s is None:
-                self._mocap_fused_s = t
-            elif t - self._mocap_fused_s >= p.ev_reset_s and axes:
-                # poses keep coming and keep failing the gate (a timing or scale error the
-                # filter does not model): reset to them rather than dead-reckon away, as
-                # EKF2 resets a position source whose fusion is failing
-                self.estimate = ekf.reset_position(
-                    self.estimate, innovation, axes, p.ev_pos_noise_m
-                )
-                self._mocap_fused_s = t
-                self.quality.resets += 1
-                self.events.append("estimator: position reset to motion capture")
-
-    def _gps_position(self, g: dict) -> tuple[float, float, float]:
-        o = self.origin
-        east, north = geodetic_to_local(o[0], o[1], g["lat"] * 1e-7, g["lon"] * 1e-7)
-        return (east, north, g["alt"] * 1e-3 - o[2])
-
-    def _fuse_gps(self, g: dict, t: float) -> None:
-        p = self.params
-        if g["fix_type"] < 3:
-            return
-        self._last_seen["GPS"] = t
-        position, _ = self._history.at_capture(self.estimate, g["time_usec"])
-        axes = ([0, 1] if p.gps_ctrl & GPS_POS else []) + (
-            [2] if p.gps_ctrl & GPS_ALT and self.height_source == "gps" else []
-        )
-        if axes:
-            measured = np.array(self._gps_position(g))
-            sd = np.array([p.gps_pos_noise_m, p.gps_pos_noise_m, 1.6 * p.gps_pos_noise_m])
-            self._fuse("GPS position", ekf.fuse_position(
-                self.estimate, measured, np.array(position), sd, p.gate_sd, axes
-            ))  # fmt: skip
-        if p.gps_ctrl & GPS_VEL:
-            v = np.array(ned_to_enu((g["vn"] * 0.01, g["ve"] * 0.01, g["vd"] * 0.01)))
-            self._fuse("GPS velocity", ekf.fuse_velocity(
-                self.estimate, v, p.gps_vel_noise_m_s, p.gate_sd
-            ))  # fmt: skip
-
-    def _range_sd(self, range_m: float) -> float:
-        return self.params.rng_noise_m + self.params.rng_noise_per_m * range_m
-
-    def _fuse_flow(self, f: dict, imu: Imu, t: float) -> None:
-        """Flow (body FRD, integrated over the message's interval) less the gyro's share,
-        times the height: the body's horizontal velocity."""
-        p = self.params
-        dt = f["integration_time_us"] * 1e-6
-        height = f["distance"]
-        if f["quality"] == 0 or dt <= 0.0 or not height > 0.0:
-            return
-        self._last_seen["optical flow"] = t
-        rates = np.array(imu.rates) - self.estimate.gyro_bias_rad_s  # FLU; flow was made in FRD
-        # FRD: flow_x = (p - v_y / h) dt, flow_y = (q + v_x / h) dt  (simbridge/hil.py)
-        p_frd, q_frd = rates[0], -rates[1]
-        vy_frd = (p_frd - f["integrated_x"] / dt) * height
-        vx_frd = (f["integrated_y"] / dt - q_frd) * height
-        v_flu = np.array([vx_frd, -vy_frd])
-        sd = p.of_noise_rad_s * max(height, 0.05)
-        self._fuse("optical flow", ekf.fuse_body_velocity(self.estimate, v_flu, sd, p.gate_sd))
 
     def _height_source(self, t: float, range_m: float | None) -> str:
         """The reference if it is alive, else the first live fallback; over a baro or GPS
         reference, the range while low and slow (range aid, EKF2_RNG_CTRL 1)."""
         p = self.params
-        timeout = p.source_timeout_s
+        rng = self.settings("range")
         alive = {
-            "vision": bool(p.ev_ctrl & EV_VPOS)
-            and t - self._last_seen.get("motion capture", -math.inf) <= timeout,
-            "range": bool(p.rng_ctrl) and t - self._last_seen.get("range", -math.inf) <= timeout,
+            "vision": bool(self.settings("mocap").ev_ctrl & EV_VPOS) and self.alive(MOCAP, t),
+            "range": bool(rng.rng_ctrl) and self.alive(RANGE, t),
             "baro": bool(p.baro_ctrl),
-            "gps": bool(p.gps_ctrl & GPS_ALT) and t - self._last_seen.get("GPS", -math.inf) <= 1.0,
+            "gps": bool(self.settings("gps").gps_ctrl & GPS_ALT)
+            and t - self._last_seen.get(GPS, -math.inf) <= 1.0,
         }
         wanted = HEIGHT_NAMES[p.hgt_ref]
         if (
             wanted in ("baro", "gps")
-            and p.rng_ctrl == 1
+            and rng.rng_ctrl == 1
             and alive["range"]
             and self._aiding(range_m)
         ):
@@ -402,17 +314,19 @@ class Navigation:
         assert e is not None
         if range_m is None:
             return self.height_source == "range"
-        limit = self.params.rng_aid_max_height_m * (1.0 if self.height_source == "range" else 0.8)
+        rng = self.settings("range")
+        limit = rng.rng_aid_max_height_m * (1.0 if self.height_source == "range" else 0.8)
         speed = float(np.hypot(e.velocity_m_s[0], e.velocity_m_s[1]))
-        return range_m <= limit and speed <= self.params.rng_aid_max_speed_m_s
+        return range_m <= limit and speed <= rng.rng_aid_max_speed_m_s
 
     def _fuse_height(self, imu: Imu, range_m: float | None, t: float) -> None:
         p = self.params
+        rng = self.settings("range")
         source = self._height_source(t, range_m)
         if source != self.height_source:
             self.events.append(f"estimator: height from {source} (was {self.height_source})")
             self.quality.resets += 1
-            aid = HEIGHT_NAMES[p.hgt_ref] in ("baro", "gps") and p.rng_ctrl == 1
+            aid = HEIGHT_NAMES[p.hgt_ref] in ("baro", "gps") and rng.rng_ctrl == 1
             if source == "range":
                 # heights above the surface from now on: under range aid, above the surface
                 # the vehicle stood on (PX4 resets its height to the range's the same way),
@@ -433,12 +347,12 @@ class Navigation:
         self._standing_before, self._standing = self._standing, False
         _, qx, qy, _ = e.quaternion.tolist()
         tilt_cos = 1 - 2 * (qx * qx + qy * qy)  # R(q)[2, 2]
-        if range_m is not None and p.rng_ctrl:
+        if range_m is not None and rng.rng_ctrl:
             height = range_m * tilt_cos
-            sd = self._range_sd(range_m)
+            sd = rng.sd_m(range_m)
             if source == "range":
                 fused = ekf.fuse_height(self.estimate, height, self.terrain_m, sd, p.gate_sd)
-                self._fuse("range", fused)
+                self.fuse(RANGE, fused)
             else:
                 self._terrain(float(e.position_m[2]) - height, sd, e)
         if source == "baro" and p.baro_ctrl and self._baro_ref_m is not None:
@@ -450,7 +364,7 @@ class Navigation:
             self._baro_n += 1
             if self._steps % SLOW_FUSION_EVERY == 0:
                 z = float(self.estimate.position_m[2]) + self._baro_sum / self._baro_n
-                self._fuse("barometer", ekf.fuse_height(
+                self.fuse("barometer", ekf.fuse_height(
                     self.estimate, z, 0.0, p.baro_noise_m, p.gate_sd
                 ))  # fmt: skip
                 self._baro_sum, self._baro_n = 0.0, 0
@@ -473,7 +387,7 @@ class Navigation:
             e = self.estimate
             # standing still, it does not climb: a barometer's or a fix's noise must not
             # move it (the barometer's reference meanwhile averages its offset)
-            self._fuse("at rest", ekf.fuse_height(e, self._rest_z_m, 0.0, RESTING_SD_M, 1e3))
+            self.fuse("at rest", ekf.fuse_height(e, self._rest_z_m, 0.0, RESTING_SD_M, 1e3))
             e = self.estimate
         if self.height_source == "range":
             return
@@ -485,3 +399,8 @@ class Navigation:
         variance = sd_m * sd_m + float(e.covariance[2, 2])
         self.terrain, reset = terrain_update(self.terrain, measured_m, variance, speed, e.time_us)
         self.quality.resets += reset
+
+
+@functools.cache
+def _declared_defaults(source: str) -> Any:
+    return SOURCES[source].settings()

@@ -34,14 +34,3 @@ def imu_from(step: Step) -> Imu:
 def pressure_altitude_m(pressure_hpa: float) -> float:
     """The international standard atmosphere's altitude of a pressure (troposphere)."""
     return (1.0 - (pressure_hpa / 1013.25) ** (1.0 / 5.25588)) / 2.25577e-5
-
-
-def range_reading(step: Step) -> float | None:
-    """The newest downward range: the flow deck's float metres, else DISTANCE_SENSOR's cm."""
-    if "HIL_OPTICAL_FLOW" in step.new and step.latest["HIL_OPTICAL_FLOW"]["distance"] > 0.0:
-        return float(step.latest["HIL_OPTICAL_FLOW"]["distance"])
-    if "DISTANCE_SENSOR" in step.new:
-        d = step.latest["DISTANCE_SENSOR"]
-        if d["min_distance"] <= d["current_distance"] <= d["max_distance"]:
-            return d["current_distance"] * 0.01
-    return None

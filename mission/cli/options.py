@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
 DEFAULT_LOGS = Path("logs")
@@ -105,7 +106,20 @@ def gcs_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-SENSOR_SET_NAMES = ("mocap", "flow", "gps")
+class _SensorSetNames:
+    """The sensor sets the estimator's sources declare, asked for only when the parser
+    checks or lists them (the parser imports none of the autopilot until then)."""
+
+    def __iter__(self) -> Iterator[str]:
+        from autopilot.estimation.sources import sensor_sets
+
+        return iter(sensor_sets())
+
+    def __contains__(self, name: object) -> bool:
+        return name in list(self)
+
+
+SENSOR_SET_NAMES = _SensorSetNames()
 
 
 def add_sensor_options(p: argparse.ArgumentParser) -> None:
@@ -133,10 +147,11 @@ def add_sensor_options(p: argparse.ArgumentParser) -> None:
 
 def sensor_arguments(args: argparse.Namespace) -> tuple[list[str], list[str]]:
     """(the simulator's options, the autopilot's --param options) for the chosen sensors."""
-    from autopilot.estimation.estimator_params import SENSOR_SETS
+    from autopilot.estimation.sources import sensor_sets
 
     sim = ["--ideal-sensors"] if args.ideal_sensors else []
     if args.sensor_seed is not None:
         sim += ["--sensor-seed", str(args.sensor_seed)]
-    params = [a for k, v in SENSOR_SETS[args.sensors].items() for a in ("--param", f"{k}={v}")]
+    chosen = sensor_sets()[args.sensors]
+    params = [a for k, v in chosen.items() for a in ("--param", f"{k}={v}")]
     return sim, params
