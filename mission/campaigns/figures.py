@@ -1,0 +1,173 @@
+"""`groundfx figures`: every figure README.md and docs/ quote, from the command that makes it.
+
+Each source runs one seeded command and writes `docs/results/<name>.json` with the date, the
+commit, the machine's load average and the command, so that a reader can run it again and
+get the same numbers. The pages quote a figure between markers that are invisible on GitHub,
+`<!--fig demo.neural.hold_rms_mm-->1.05<!--/fig-->`, and `rewrite_pages` fills them in from
+the results files. Only seeded figures are quoted: speed depends on the machine and its load.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import re
+import subprocess
+import tempfile
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[2]
+RESULTS_DIR = REPO / "docs" / "results"
+MARKER = re.compile(r"<!--fig ([\w.-]+)-->(.*?)<!--/fig-->", flags=re.S)
+
+Figures = dict[str, str]
+
+
+@dataclass(frozen=True)
+class Source:
+    """One command whose output the pages quote."""
+
+    name: str
+    command: str
+    run: Callable[[], Figures]
+
+
+def _quiet(_text: str) -> None:
+    pass
+
+
+def _demo() -> Figures:
+    from mission.campaigns.demo import fly_demo
+
+    with tempfile.TemporaryDirectory() as logs:
+        summaries = fly_demo("rho2", Path(logs), say=_quiet)
+    figures = {}
+    for model, s in summaries.items():
+        figures[f"{model}.landing_error_mm"] = f"{s['landing_error_m'] * 1000:.2f}"
+        figures[f"{model}.hold_rms_mm"] = f"{s['hold_z_rms_error_m'] * 1000:.2f}"
+        figures[f"{model}.touchdown_speed_m_s"] = f"{s['touchdown_speed_m_s']:.3f}"
+    return figures
+
+
+def _evaluate() -> Figures:
+    from mission.campaigns.trials import evaluate_models
+
+    result = evaluate_models(list(range(10)), "rho2", None, say=_quiet)
+    figures = {
+        f"{model}.hold_rms_mm": f"{sum(errors) / len(errors) * 1000:.2f}"
+        for model, errors in result["errors_m"].items()
+    }
+    figures["gap_closed_pct"] = f"{result['gap_closed'] * 100:.0f}"
+    figures["welch_p"] = f"{result['welch_p']:.1g}"
+    figures["trials"] = str(len(result["errors_m"]["none"]))
+    return figures
+
+
+def _lift() -> Figures:
+    from simbridge.demo import run_demo
+
+    lines: list[str] = []
+    with tempfile.TemporaryDirectory() as logs:
+        run_demo("default", Path(logs), say=lines.append)
+    text = "\n".join(lines)
+    predicted = re.search(r"predicts ([\d.]+) m/s\^2", text)
+    first_row = re.search(r"^\s*0\.000\s+([\d.]+)\s+[-\d.]+\s+([-\d.]+)\s*$", text, flags=re.M)
+    if predicted is None or first_row is None:
+        raise RuntimeError(f"groundfx demo --lift printed no prediction and row:\n{text}")
+    return {
+        "predicted_m_s2": predicted.group(1),
+        "measured_m_s2": first_row.group(2),
+        "altitude_m": first_row.group(1),
+    }
+
+
+SOURCES = (
+    Source("lift", "groundfx demo --lift", _lift),
+    Source("demo", "groundfx demo", _demo),
+    Source("evaluate", "groundfx learn evaluate", _evaluate),
+)
+
+
+def _commit() -> str:
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], cwd=REPO, capture_output=True, text=True, check=False
+        ).stdout.strip()
+
+    sha = git("rev-parse", "--short=12", "HEAD") or "unknown"
+    return sha + ("-dirty" if git("status", "--porcelain", "--untracked-files=no") else "")
+
+
+def produce(source: Source, results_dir: Path = RESULTS_DIR) -> Path:
+    """Run one source's command and write its results file."""
+    load_before = os.getloadavg()
+    started = datetime.now(UTC)
+    figures = source.run()
+    record: dict[str, Any] = {
+        "command": source.command,
+        "date": started.strftime("%Y-%m-%d %H:%M UTC"),
+        "commit": _commit(),
+        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {platform.python_version()}",
+        "load_average_1min": [round(load_before[0], 1), round(os.getloadavg()[0], 1)],
+        "figures": figures,
+    }
+    results_dir.mkdir(parents=True, exist_ok=True)
+    path = results_dir / f"{source.name}.json"
+    path.write_text(json.dumps(record, indent=2) + "\n")
+    return path
+
+
+def load_figures(results_dir: Path = RESULTS_DIR) -> Figures:
+    """Every figure of every results file, named `<file>.<figure>`."""
+    figures = {}
+    for path in sorted(results_dir.glob("*.json")):
+        for key, value in json.loads(path.read_text())["figures"].items():
+            figures[f"{path.stem}.{key}"] = value
+    return figures
+
+
+def quoted(text: str) -> list[tuple[str, str]]:
+    """The figures a page quotes: (name, the value written)."""
+    return [(m.group(1), m.group(2)) for m in MARKER.finditer(text)]
+
+
+def pages(repo: Path = REPO) -> list[Path]:
+    return [repo / "README.md", *sorted((repo / "docs").glob("*.md"))]
+
+
+def rewrite_pages(figures: Figures, paths: Iterable[Path]) -> list[str]:
+    """Fill every marker from the figures; returns the names no results file holds."""
+    unknown: list[str] = []
+
+    def fill(match: re.Match[str]) -> str:
+        name = match.group(1)
+        if name not in figures:
+            unknown.append(name)
+            return match.group(0)
+        return f"<!--fig {name}-->{figures[name]}<!--/fig-->"
+
+    for path in paths:
+        text = path.read_text()
+        new = MARKER.sub(fill, text)
+        if new != text:
+            path.write_text(new)
+    return unknown
+
+
+def run_figures(names: list[str] | None, rewrite_only: bool, say=print) -> int:
+    chosen = [s for s in SOURCES if names is None or s.name in names]
+    if not rewrite_only:
+        for source in chosen:
+            say(f"groundfx figures: {source.command} ...")
+            say(f"  wrote {produce(source).relative_to(REPO)}")
+    unknown = rewrite_pages(load_figures(), pages())
+    if unknown:
+        say("groundfx figures: no results for " + ", ".join(sorted(set(unknown))))
+        return 1
+    say("groundfx figures: README.md and docs/*.md quote the results files")
+    return 0
