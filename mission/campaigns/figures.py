@@ -9,6 +9,8 @@ the results files. Only seeded figures are quoted: speed depends on the machine 
 
 from __future__ import annotations
 
+import argparse
+import functools
 import json
 import os
 import platform
@@ -159,12 +161,47 @@ def rewrite_pages(figures: Figures, paths: Iterable[Path]) -> list[str]:
     return unknown
 
 
+CLI_PAGE = REPO / "docs" / "cli.md"
+HELP_WIDTH = 100
+
+
+def _parsers(
+    parser: argparse.ArgumentParser, words: tuple[str, ...] = ()
+) -> list[tuple[tuple[str, ...], argparse.ArgumentParser]]:
+    """Every parser below this one, depth first, with the words that reach it."""
+    found = [(words, parser)]
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, child in action.choices.items():
+                found += _parsers(child, (*words, name))
+    return found
+
+
+def cli_reference() -> str:
+    """docs/cli.md: every command's `--help`, at a fixed width so the page does not depend on
+    the terminal it was made in."""
+    from mission.cli.main import build_parser
+
+    parts = [
+        "# Command reference",
+        "",
+        "Every `groundfx` command's `--help`, generated from the parsers by `groundfx figures`",
+        "(a test checks that it is current).",
+    ]
+    for words, parser in _parsers(build_parser()):
+        parser.formatter_class = functools.partial(parser.formatter_class, width=HELP_WIDTH)
+        parts += ["", f"## `{' '.join(('groundfx', *words))}`", "", "```text"]
+        parts += [parser.format_help().rstrip(), "```"]
+    return "\n".join(parts) + "\n"
+
+
 def run_figures(names: list[str] | None, rewrite_only: bool, say=print) -> int:
     chosen = [s for s in SOURCES if names is None or s.name in names]
     if not rewrite_only:
         for source in chosen:
             say(f"groundfx figures: {source.command} ...")
             say(f"  wrote {produce(source).relative_to(REPO)}")
+    CLI_PAGE.write_text(cli_reference())
     unknown = rewrite_pages(load_figures(), pages())
     if unknown:
         say("groundfx figures: no results for " + ", ".join(sorted(set(unknown))))
