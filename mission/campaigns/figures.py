@@ -56,17 +56,36 @@ def _demo() -> Figures:
     return figures
 
 
-def _evaluate() -> Figures:
-    from mission.campaigns.trials import evaluate_models
+def _hold_errors_m(seeds: list[int], model: str, world: str) -> list[float]:
+    """`groundfx learn evaluate`'s trials of one model. A flight whose link was cut (a process
+    stalled for a second on a loaded machine) has no hold: it is flown again, and being
+    seeded and in lockstep it flies as it would have."""
+    from mission.campaigns.trials import fly_landing_trials
 
-    result = evaluate_models(list(range(10)), "rho2", None, say=_quiet)
-    figures = {
-        f"{model}.hold_rms_mm": f"{sum(errors) / len(errors) * 1000:.2f}"
-        for model, errors in result["errors_m"].items()
-    }
-    figures["gap_closed_pct"] = f"{result['gap_closed'] * 100:.0f}"
-    figures["welch_p"] = f"{result['welch_p']:.1g}"
-    figures["trials"] = str(len(result["errors_m"]["none"]))
+    runs = fly_landing_trials(seeds, model, world)
+    for i, run in enumerate(runs):
+        for _ in range(2):
+            if run.get("hold_z_rms_error_m") is not None:
+                break
+            run = runs[i] = fly_landing_trials([seeds[i]], model, world)[0]
+    return [float(run["hold_z_rms_error_m"]) for run in runs]
+
+
+def _evaluate() -> Figures:
+    """As `groundfx learn evaluate` at its defaults: the rho2 world, the network nearest its rho,
+    seeds 0-9."""
+    import numpy as np
+
+    from learner.stats import gap_closed, welch
+
+    seeds = list(range(10))
+    errors = {m: np.array(_hold_errors_m(seeds, m, "rho2")) for m in ("none", "analytic", "neural")}
+    figures = {f"{m}.hold_rms_mm": f"{e.mean() * 1000:.2f}" for m, e in errors.items()}
+    closed = gap_closed(errors["none"], errors["analytic"], errors["neural"])
+    _, p = welch(errors["neural"], errors["none"])
+    figures["gap_closed_pct"] = f"{closed * 100:.0f}"
+    figures["welch_p"] = f"{p:.1g}"
+    figures["trials"] = str(len(seeds))
     return figures
 
 
