@@ -83,8 +83,9 @@ def _evaluate() -> Figures:
     figures = {f"{m}.hold_rms_mm": f"{e.mean() * 1000:.2f}" for m, e in errors.items()}
     closed = gap_closed(errors["none"], errors["analytic"], errors["neural"])
     _, p = welch(errors["neural"], errors["none"])
-    figures["gap_closed_pct"] = f"{closed * 100:.0f}"
-    figures["welch_p"] = f"{p:.1g}"
+    # as `groundfx learn evaluate` prints them
+    figures["gap_closed_pct"] = f"{closed * 100:.1f}"
+    figures["welch_p"] = f"{p:.2g}"
     figures["trials"] = str(len(seeds))
     return figures
 
