@@ -108,10 +108,58 @@ def _lift() -> Figures:
     }
 
 
+GAP_CASE = "rotor_drag_b"
+GAP_COMMANDS = (
+    f"groundfx gap bench --out logs/gap-bench --cases {GAP_CASE}; "
+    f"groundfx gap diagnose logs/gap-bench/{GAP_CASE}/flight0.csv "
+    f"logs/gap-bench/{GAP_CASE}/flight1.csv --holdout logs/gap-bench/{GAP_CASE}/flight100.csv "
+    f"--world logs/gap-bench/{GAP_CASE}/nominal_world.yaml --folds 2 --out logs/gap-rotor-drag"
+)
+
+
+def _gap() -> Figures:
+    """The gap diagnosis's worked example: a bench case's flights, diagnosed by hand."""
+    import contextlib
+    import io
+
+    import yaml
+
+    from mission.cli.main import main
+
+    with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
+        folder = Path(tmp) / "gap-bench" / GAP_CASE
+        main(["gap", "bench", "--out", str(folder.parent), "--cases", GAP_CASE])
+        logs = [str(folder / f"flight{seed}.csv") for seed in (0, 1, 100)]
+        out = Path(tmp) / "gap-rotor-drag"
+        world = str(folder / "nominal_world.yaml")
+        code = main(["gap", "diagnose", *logs[:2], "--holdout", logs[2], "--world", world,
+                     "--folds", "2", "--out", str(out)])  # fmt: skip
+        if code != 0:
+            raise RuntimeError(f"groundfx gap diagnose exited with {code}")
+        result = json.loads((out / "gap.json").read_text())
+        real = yaml.safe_load((folder / "real_world.yaml").read_text())
+    drag = result["effects"]["rotor_drag"]
+    kxy = drag["parameters"]["kxy"]
+    true_kxy = next(e for e in real["effects"] if e["name"] == "rotor_drag")["coefficient_n_s_m"]
+    force = result["gap"]["force_rms_n"]
+    return {
+        "rotor_drag.status": drag["status"],
+        "rotor_drag.kxy": f"{kxy['value']:.3g}",
+        "rotor_drag.kxy_low": f"{kxy['ci95'][0]:.3g}",
+        "rotor_drag.kxy_high": f"{kxy['ci95'][1]:.3g}",
+        "rotor_drag.true_kxy": f"{true_kxy[0]:.3g}",
+        "chosen": ", ".join(result["chosen"]),
+        "force_gap_before_mn": f"{force['before'] * 1000:.2f}",
+        "force_gap_after_mn": f"{force['after'] * 1000:.2f}",
+        "shrink_pct": f"{force['shrink'] * 100:.0f}",
+    }
+
+
 SOURCES = (
     Source("lift", "groundfx demo --lift", _lift),
     Source("demo", "groundfx demo", _demo),
     Source("evaluate", "groundfx learn evaluate", _evaluate),
+    Source("gap", GAP_COMMANDS, _gap),
 )
 
 
