@@ -122,3 +122,19 @@ def test_the_demo_ends_with_its_models_side_by_side_and_how_to_review_them() -> 
     assert table[0].startswith("| model | landing error (mm) | hold RMS (mm) | touchdown speed")
     assert "| neural | 1.20 | 0.40 | 0.080 | logs/x-neural.rrd |" in table
     assert "  groundfx review logs/x-none.rrd" in table
+
+
+def test_every_mission_the_guide_shows_is_one_the_vehicle_accepts(tmp_path: Path) -> None:
+    from mission.cli.main import main
+
+    blocks = [
+        block
+        for page in pages(REPO)
+        for block in re.findall(r"```yaml\n(.*?)```", page.read_text(), flags=re.S)
+        if "waypoints:" in block
+    ]
+    assert len(blocks) >= 2
+    for n, block in enumerate(blocks):
+        path = tmp_path / f"mission{n}.yaml"
+        path.write_text(block)
+        assert main(["mission", "check", str(path)]) == 0, block
