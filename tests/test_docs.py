@@ -10,14 +10,8 @@ from urllib.parse import unquote
 
 import pytest
 
-from mission.campaigns.figures import (
-    CLI_PAGE,
-    RESULTS_DIR,
-    cli_reference,
-    load_figures,
-    pages,
-    quoted,
-)
+from mission.campaigns.figures import CLI_PAGE, RESULTS_DIR, load_figures, pages, quoted
+from mission.cli.reference import cli_reference
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"

@@ -9,13 +9,12 @@ the results files. Only seeded figures are quoted: speed depends on the machine 
 
 from __future__ import annotations
 
-import argparse
-import functools
 import json
 import os
 import platform
 import re
 import subprocess
+import sys
 import tempfile
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -117,25 +116,28 @@ GAP_COMMANDS = (
 )
 
 
+def _groundfx(*args: str) -> None:
+    """One `groundfx` command in a process of its own, as a user runs it."""
+    done = subprocess.run(
+        [sys.executable, "-m", "mission.cli", *args], cwd=REPO, capture_output=True, text=True
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"groundfx {' '.join(args)} exited with {done.returncode}:\n"
+                           f"{done.stderr[-2000:]}")  # fmt: skip
+
+
 def _gap() -> Figures:
     """The gap diagnosis's worked example: a bench case's flights, diagnosed by hand."""
-    import contextlib
-    import io
-
     import yaml
 
-    from mission.cli.main import main
-
-    with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
+    with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "gap-bench" / GAP_CASE
-        main(["gap", "bench", "--out", str(folder.parent), "--cases", GAP_CASE])
+        _groundfx("gap", "bench", "--out", str(folder.parent), "--cases", GAP_CASE)
         logs = [str(folder / f"flight{seed}.csv") for seed in (0, 1, 100)]
         out = Path(tmp) / "gap-rotor-drag"
         world = str(folder / "nominal_world.yaml")
-        code = main(["gap", "diagnose", *logs[:2], "--holdout", logs[2], "--world", world,
-                     "--folds", "2", "--out", str(out)])  # fmt: skip
-        if code != 0:
-            raise RuntimeError(f"groundfx gap diagnose exited with {code}")
+        _groundfx("gap", "diagnose", *logs[:2], "--holdout", logs[2], "--world", world,
+                  "--folds", "2", "--out", str(out))  # fmt: skip
         result = json.loads((out / "gap.json").read_text())
         real = yaml.safe_load((folder / "real_world.yaml").read_text())
     drag = result["effects"]["rotor_drag"]
@@ -170,7 +172,10 @@ def _commit() -> str:
         ).stdout.strip()
 
     sha = git("rev-parse", "--short=12", "HEAD") or "unknown"
-    return sha + ("-dirty" if git("status", "--porcelain", "--untracked-files=no") else "")
+    # the pages and results this run rewrites do not count: the code it ran does
+    changed = git("status", "--porcelain", "--untracked-files=no", "--", ".", ":(exclude)docs",
+                  ":(exclude)README.md")  # fmt: skip
+    return sha + ("-dirty" if changed else "")
 
 
 def produce(source: Source, results_dir: Path = RESULTS_DIR) -> Path:
@@ -230,37 +235,10 @@ def rewrite_pages(figures: Figures, paths: Iterable[Path]) -> list[str]:
 
 
 CLI_PAGE = REPO / "docs" / "cli.md"
-HELP_WIDTH = 100
 
 
-def _parsers(
-    parser: argparse.ArgumentParser, words: tuple[str, ...] = ()
-) -> list[tuple[tuple[str, ...], argparse.ArgumentParser]]:
-    """Every parser below this one, depth first, with the words that reach it."""
-    found = [(words, parser)]
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for name, child in action.choices.items():
-                found += _parsers(child, (*words, name))
-    return found
-
-
-def cli_reference() -> str:
-    """docs/cli.md: every command's `--help`, at a fixed width so the page does not depend on
-    the terminal it was made in."""
-    from mission.cli.main import build_parser
-
-    parts = [
-        "# Command reference",
-        "",
-        "Every `groundfx` command's `--help`, generated from the parsers by `groundfx figures`",
-        "(a test checks that it is current).",
-    ]
-    for words, parser in _parsers(build_parser()):
-        parser.formatter_class = functools.partial(parser.formatter_class, width=HELP_WIDTH)
-        parts += ["", f"## `{' '.join(('groundfx', *words))}`", "", "```text"]
-        parts += [parser.format_help().rstrip(), "```"]
-    return "\n".join(parts) + "\n"
+def _groundfx_module(module: str, *args: str) -> None:
+    subprocess.run([sys.executable, "-m", module, *args], cwd=REPO, check=True)
 
 
 def run_figures(names: list[str] | None, rewrite_only: bool, say=print) -> int:
@@ -269,7 +247,7 @@ def run_figures(names: list[str] | None, rewrite_only: bool, say=print) -> int:
         for source in chosen:
             say(f"groundfx figures: {source.command} ...")
             say(f"  wrote {produce(source).relative_to(REPO)}")
-    CLI_PAGE.write_text(cli_reference())
+    _groundfx_module("mission.cli.reference", str(CLI_PAGE))
     unknown = rewrite_pages(load_figures(), pages())
     if unknown:
         say("groundfx figures: no results for " + ", ".join(sorted(set(unknown))))
