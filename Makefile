@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: install compile demo test lint bench clean
+.PHONY: install compile demo test lint bench figures clean
 
 # uv installs what pip resolves, the same versions, faster than pip. It reads no pip
 # configuration: the local wheel cache that holds the CPU build of torch is passed on from
@@ -35,6 +35,11 @@ test: compile
 	$(BIN)/ruff check .
 # two workers, a test file each: a flight's two processes take turns on one core
 	$(BIN)/pytest -q -n 2 --dist loadfile
+
+# every figure README.md and docs/ quote, from its seeded command (a few minutes; results in
+# docs/results/, with the date, commit and load)
+figures: compile
+	$(BIN)/groundfx figures
 
 bench: compile
 	$(BIN)/groundfx bench sim --json

@@ -1,4 +1,4 @@
-"""Every option the README shows on a `groundfx` command exists on that command."""
+"""Every option README.md and docs/ show on a `groundfx` command exists on that command."""
 
 from __future__ import annotations
 
@@ -8,7 +8,12 @@ from pathlib import Path
 
 from mission.cli.main import build_parser
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+REPO = Path(__file__).resolve().parents[1]
+# the command reference is the parsers' own help (tests/test_docs.py holds it to them)
+PAGES = [
+    REPO / "README.md",
+    *(p for p in sorted((REPO / "docs").glob("*.md")) if p.name != "cli.md"),
+]
 
 
 def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
@@ -23,10 +28,11 @@ def _options(parser: argparse.ArgumentParser) -> set[str]:
 
 
 def _commands(text: str) -> list[str]:
-    """`groundfx ...` as the README writes them: code spans, and lines of code blocks."""
+    """`groundfx ...` as the pages write them: code spans, and lines of code blocks (a line
+    ending in a backslash continues on the next)."""
     spans = re.findall(r"`(groundfx [^`]+)`", text)
     blocks = re.findall(r"```(?:sh|bash|console)?\n(.*?)```", text, flags=re.S)
-    lines = [ln.strip() for b in blocks for ln in b.splitlines()]
+    lines = [ln.strip() for b in blocks for ln in b.replace("\\\n", " ").splitlines()]
     return spans + [ln for ln in lines if ln.startswith("groundfx ")]
 
 
@@ -46,8 +52,8 @@ def _parsers(words: list[str]) -> list[argparse.ArgumentParser]:
     return level
 
 
-def test_every_option_the_readme_shows_exists_on_its_command() -> None:
-    commands = _commands(README.read_text())
+def test_every_option_the_pages_show_exists_on_its_command() -> None:
+    commands = [c for page in PAGES for c in _commands(page.read_text())]
     assert len(commands) > 30  # the synopses and examples were found
     missing = []
     for command in commands:

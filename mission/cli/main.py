@@ -6,7 +6,18 @@ from __future__ import annotations
 import argparse
 import sys
 
-from mission.cli import autopilot, bench, experiment, flight, gap, learn, missions, plot, review
+from mission.cli import (
+    autopilot,
+    bench,
+    experiment,
+    figures,
+    flight,
+    gap,
+    learn,
+    missions,
+    plot,
+    review,
+)
 from mission.cli import sim as sim_cli
 from simbridge.config import ConfigError
 
@@ -29,6 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_parser(sub)
     gap.add_parser(sub)
     flight.add_demo_parser(sub)
+    figures.add_parser(sub)
     return parser
 
 
