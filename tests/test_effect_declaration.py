@@ -1,6 +1,6 @@
 """An effect declared once: a new effect written as one module (its parameters, its force,
 its fit candidate) and named in a world file flies in the simulator and is fitted by the
-diagnosis, with no other file edited (docs/where-a-change-goes/effect.md)."""
+diagnosis, with no other file edited (docs/where-a-change-goes.md)."""
 
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ The forces of the effects below are computed by the physics step (simbridge/phys
 simbridge/rotor_dynamics.py) and the diagnosis's world model (learner/gap/candidates.py),
 which share rays, rotor heights and rotor dynamics between them; a new effect declares its
 force here instead (`Effect.force`, `Candidate.log_force`): see
-docs/where-a-change-goes/effect.md.
+docs/where-a-change-goes.md.
 """
 
 from __future__ import annotations
@@ -357,4 +357,4 @@ for _effect in UNCATALOGUED_EFFECTS:
     register(_effect)
 
 # Effects declared in modules of their own register themselves when imported: one import
-# each below (docs/where-a-change-goes/effect.md).
+# each below (docs/where-a-change-goes.md).

@@ -5,7 +5,7 @@ parameters (a frozen dataclass whose fields carry unit, range and meaning throug
 `simbridge.config.param`), its force on the simulated body (`force`, for an effect the
 physics step does not compute itself) and what the sim-to-real diagnosis needs to fit it
 (`candidate`). The world loader, the simulator and the diagnosis read this registry; a new
-effect is one module that calls `register` (see docs/where-a-change-goes/effect.md).
+effect is one module that calls `register` (see docs/where-a-change-goes.md).
 """
 
 from __future__ import annotations
