@@ -25,7 +25,6 @@ class Setpoint:
     yaw_rad: float = 0.0
 
 
-
 @dataclass
 class Step:
     """The latest message of each kind, as fields, when a HIL_SENSOR closed the step."""

@@ -68,11 +68,19 @@ def _is_parent(package: str, module: str) -> bool:
 
 # The autopilot's rooms, lowest first: a room imports only from its own and lower levels.
 AUTOPILOT_LEVELS = (
-    {"types", "identity", "metrics"},  # what every room passes around; pure figures
+    {"types", "request", "identity", "metrics"},  # what every room passes around; pure figures
     {"simlink", "estimation", "control"},  # the simulator link; state estimation; control laws
     {"commander"},  # phases, modes, requests, failsafes, mission items
     {"params"},  # the parameters of every room, tuned over MAVLink
-    {"gcs", "recording", "online", "nav_metrics", "truth"},  # the loop's companions
+    {
+        "gcs",
+        "recording",
+        "online",
+        "nav_metrics",
+        "truth",
+        "summary",
+        "tuning",
+    },  # the loop's companions
     {"runner"},  # thin wiring: link -> estimate -> command -> control -> send
 )
 
@@ -93,3 +101,33 @@ def test_autopilot_rooms_import_down_their_levels() -> None:
         if _room(m) and _room(d) and level[_room(d)] > level[_room(m)]
     ]
     assert upward == []
+
+
+MAX_MODULE_LINES = 500  # a module longer than this holds more than one concern
+MAX_FUNCTION_LINES = 80  # a function longer than this holds more than one step
+SIZED_PACKAGES = ("autopilot", "simbridge")
+
+
+def _sized_files() -> list[Path]:
+    return sorted(p for pkg in SIZED_PACKAGES for p in (ROOT / pkg).rglob("*.py"))
+
+
+def test_no_module_is_over_its_size() -> None:
+    long = [
+        f"{p.relative_to(ROOT)}: {n} lines"
+        for p in _sized_files()
+        if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES
+    ]
+    assert long == []
+
+
+def test_no_function_is_over_its_size() -> None:
+    long = []
+    for p in _sized_files():
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                assert node.end_lineno is not None
+                lines = node.end_lineno - node.lineno + 1
+                if lines > MAX_FUNCTION_LINES:
+                    long.append(f"{p.relative_to(ROOT)}:{node.lineno} {node.name}: {lines} lines")
+    assert long == []
