@@ -68,19 +68,12 @@ def _is_parent(package: str, module: str) -> bool:
 
 # The autopilot's rooms, lowest first: a room imports only from its own and lower levels.
 AUTOPILOT_LEVELS = (
-    {"types", "request", "identity", "metrics"},  # what every room passes around; pure figures
+    {"types", "identity", "metrics"},  # what every room passes around; pure figures
     {"simlink", "estimation", "control"},  # the simulator link; state estimation; control laws
     {"commander"},  # phases, modes, requests, failsafes, mission items
     {"params"},  # the parameters of every room, tuned over MAVLink
-    {
-        "gcs",
-        "recording",
-        "online",
-        "nav_metrics",
-        "truth",
-        "summary",
-        "tuning",
-    },  # the loop's companions
+    {"gcs", "recording", "online", "nav_metrics", "truth"},  # the loop's companions
+    {"summary", "tuning", "request"},  # the figures after a flight; settings; the request
     {"runner"},  # thin wiring: link -> estimate -> command -> control -> send
 )
 
