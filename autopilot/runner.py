@@ -16,14 +16,18 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from autopilot.commander import requests
-from autopilot.commander.commander import AIRBORNE_PHASES, CommanderState, Phase, command
-from autopilot.commander.mission_items import MissionItem
+from autopilot.commander.commander import (
+    AIRBORNE_PHASES,
+    Command,
+    CommanderState,
+    Phase,
+    command,
+)
 from autopilot.commander.modes import FlightMode
 from autopilot.control.controller import (
     ControlOutput,
@@ -44,66 +48,27 @@ from autopilot.control.land_detector import (
     landing_contact,
 )
 from autopilot.estimation.navigation import Navigation
+from autopilot.flight_config import AutopilotConfig, Flight
 from autopilot.gcs.ground_station import GroundStation, StepInput
 from autopilot.gcs.link import GcsLink
-from autopilot.gcs.signing import Signing
 from autopilot.nav_metrics import estimation_error
 from autopilot.online.learning_sample import learning_sample
-from autopilot.online.online_control import OnlineControl, OnlineOptions, vertical_tracking_error
+from autopilot.online.online_control import OnlineControl, vertical_tracking_error
 from autopilot.online.sample_schedule import SampleSchedule
-from autopilot.params import ParamStore
 from autopilot.recording.record_options import RecordOptions
-from autopilot.recording.recorder import open_recorder
-from autopilot.request import DEFAULT_MAX_FLIGHT_S
+from autopilot.recording.recorder import Recorder, open_recorder
 from autopilot.simlink import LinkLost, SimLink
 from autopilot.summary import MODES, FlightTrace, flight_figures, trace_log
 from autopilot.truth import true_height_m, true_state
 from autopilot.tuning import Tuning
-from autopilot.types import FlightState, Step
+from autopilot.types import FlightState, Setpoint, Step
 from simbridge.frames import Vec3
 from simbridge.rotors import Quad
-from simbridge.vehicle import Vehicle
 
 __all__ = ["MODES", "AutopilotConfig", "Flight", "fly_mission"]
 
 AUTO_ARM_AFTER_S = 0.2  # --auto-start: arm once the sensors have been healthy this long
 RESTING_PHASES = (Phase.DISARMED, Phase.ARMED, Phase.LANDED)  # the estimator may assume rest
-
-
-@dataclass(frozen=True)
-class AutopilotConfig:
-    sim_url: str
-    vehicle: Vehicle
-    params: ParamStore
-    origin: tuple[float, float, float]  # lat deg, lon deg, alt m of the local frame's origin
-    network: str | Path | None = None  # the neural model's weights (default: by rho)
-    mission: tuple[MissionItem, ...] = ()  # loaded before any ground station speaks
-    auto_start: bool = False  # arm and start the mission without a ground station
-    exit_after_landing: bool = True  # end once a flight has landed and settled
-    identity: str = "px4"
-    gcs_urls: tuple[str, ...] = ()
-    signing: Signing | None = None
-    link_timeout_s: float = 1.0
-    settle_after_landing_s: float = 0.5  # keep logging after disarm, to see any bounce
-    max_flight_s: float = DEFAULT_MAX_FLIGHT_S
-    should_stop: Callable[[], bool] = lambda: False  # a signal asked the loop to end
-    on_event: Callable[[float, str], None] | None = None  # modes, arming, failsafes
-    record_hz: float = 0.0  # > 0: record learning samples at this rate (thesis: 100 Hz)
-    stop_after_samples: int | None = None  # end the flight once this many are recorded
-    on_sample: Callable[[int], None] | None = None  # told the count of recorded samples
-    # told each airborne step (t, messages, the true state as a lab's motion capture would log
-    # it, rotor speeds applied over the last period): the --flight-log of the gap diagnosis
-    on_step: Callable[[float, Step, FlightState, Quad], None] | None = None
-    online: OnlineOptions = OnlineOptions()  # online learning (GFX_OL_METHOD turns it on)
-    record: RecordOptions | None = None  # the flight's rerun recording; None: off
-
-
-@dataclass
-class Flight:
-    log: np.ndarray
-    summary: dict[str, Any]
-    ended: str  # "landed", "enough samples", "mission time limit", or the lost link's reason
-    samples: np.ndarray | None = None  # learning samples, columns learner.dataset.COLUMNS
 
 
 @dataclass
@@ -129,7 +94,7 @@ class Parts:
     config: AutopilotConfig
     tuning: Tuning
     nav: Navigation
-    recorder: Any
+    recorder: Recorder
     online: OnlineControl
     gcs: GcsLink
     station: GroundStation
@@ -147,10 +112,10 @@ class Estimate:
 
 
 @dataclass(frozen=True)
-class Command:
+class Commanded:
     """The commander's answer this step, and whether the vehicle looked in ground contact."""
 
-    result: Any  # commander.CommandResult
+    result: Command
     contact: bool
 
 
@@ -242,7 +207,7 @@ def _before_command(p: Parts, s: LoopState, t: float, state: FlightState) -> Non
         p.nav.params = config.params.estimator()
 
 
-def _command(p: Parts, s: LoopState, t: float, estimate: Estimate) -> Command:
+def _command(p: Parts, s: LoopState, t: float, estimate: Estimate) -> Commanded:
     """Ground contact, the land detector, then the commander's phase and setpoint."""
     tuning, state, height = p.tuning, estimate.state, estimate.height_m
     landing = s.cmd.phase == Phase.LANDING
@@ -268,10 +233,10 @@ def _command(p: Parts, s: LoopState, t: float, estimate: Estimate) -> Command:
         tuning.vertical_lead_s,
     )
     s.cmd = cmd.state
-    return Command(cmd, contact)
+    return Commanded(cmd, contact)
 
 
-def _control(p: Parts, s: LoopState, t: float, estimate: Estimate, cmd: Any) -> Vec3 | None:
+def _control(p: Parts, s: LoopState, t: float, estimate: Estimate, cmd: Command) -> Vec3 | None:
     """The ground-effect model's estimate and the controller's rotor speeds (off without a
     setpoint); returns the model's prediction, None with the rotors off."""
     if cmd.setpoint is None:
@@ -319,7 +284,7 @@ def _integrate(p: Parts, s: LoopState, t: float, height_m: float, contact: bool)
 
 
 def _sample(
-    p: Parts, s: LoopState, t: float, step: Step, estimate: Estimate, setpoint: Any,
+    p: Parts, s: LoopState, t: float, step: Step, estimate: Estimate, setpoint: Setpoint | None,
     applied: Quad, in_the_air: bool,
 ) -> bool:  # fmt: skip
     """A learning sample when one is due, to the learner and, when recording samples, to the
@@ -347,7 +312,7 @@ def _sample(
 
 
 def _report(
-    p: Parts, s: LoopState, t: float, step: Step, estimate: Estimate, cmd: Any, applied: Quad,
+    p: Parts, s: LoopState, t: float, step: Step, estimate: Estimate, cmd: Command, applied: Quad,
     in_the_air: bool, inp: StepInput,
 ) -> None:  # fmt: skip
     """The step's truth to the flight log, the ground stations, the recording and the trace."""

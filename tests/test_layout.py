@@ -73,7 +73,7 @@ AUTOPILOT_LEVELS = (
     {"commander"},  # phases, modes, requests, failsafes, mission items
     {"params"},  # the parameters of every room, tuned over MAVLink
     {"gcs", "recording", "online", "nav_metrics", "truth"},  # the loop's companions
-    {"summary", "tuning", "request"},  # the figures after a flight; settings; the request
+    {"summary", "tuning", "request", "flight_config"},  # the request; settings; figures
     {"runner"},  # thin wiring: link -> estimate -> command -> control -> send
 )
 

@@ -87,9 +87,9 @@ def cmd_autopilot(args: argparse.Namespace) -> int:
 def _config(request: FlightRequest, should_stop: Any) -> Any:
     """The runner's configuration for `request`: vehicle, origin, parameters, mission."""
     from autopilot.commander.mission_items import Home
+    from autopilot.flight_config import AutopilotConfig
     from autopilot.gcs.signing import Signing
     from autopilot.params import ParamStore
-    from autopilot.runner import AutopilotConfig
     from autopilot.simlink import parse_url
     from mission.cli.online import online_options
     from mission.plans.formats import load_mission_file
