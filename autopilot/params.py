@@ -27,6 +27,8 @@ from autopilot.control.ground_models import MODEL_NAMES
 from autopilot.control.land_detector import LandDetectorParams
 from autopilot.estimation.estimator_params import EstimatorParams
 from autopilot.identity import identity_defaults
+from learner.online.names import METHODS, method_number_doc, method_of_number
+from learner.online.settings import OnlineSettings, tuned_in_flight
 from simbridge.config import ConfigError, param
 
 
@@ -42,35 +44,12 @@ class ModelParams:
     rho: float = param(1.0, lo=0.01, hi=50.0, doc="rho of the analytic model (equation 3.4)")
 
 
-ONLINE_METHODS = ("off", "naive", "constraint", "margin", "ewc", "replay", "rls", "composite")
-
-
 @dataclass(frozen=True)
-class OnlineParams:
-    """The online learner (learner/online/settings.py has the rest of its settings)."""
+class OnlineSwitches:
+    """What a ground station switches on the online learner; the hyperparameters it tunes are
+    the GFX_OL_* fields of OnlineSettings (learner/online/settings.py)."""
 
-    method: int = param(
-        0,
-        lo=0,
-        hi=7,
-        doc="0 off, 1 naive, 2 constraint, 3 margin, 4 ewc, 5 replay, 6 rls, 7 composite",
-    )
-    learning_rate: float = param(1e-3, lo=1e-7, hi=1.0, doc="Adam step size")
-    penalty: float = param(1.0, lo=0.0, hi=1e6, doc="lambda of constraint, margin, ewc")
-    margin: float = param(0.02, lo=0.0, hi=10.0, doc="free deviation per weight (margin)")
-    forgetting: float = param(0.95, lo=0.5, hi=1.0, doc="RLS forgetting factor per sample")
-    rls_covariance: float = param(
-        1e-6, lo=1e-9, hi=1e6, doc="RLS initial covariance p0 (trust in the offline shape)"
-    )
-    rls_scale_sd: float = param(
-        1.0, lo=0.0, hi=100.0, doc="RLS prior sd of a change of the effect's size"
-    )
-    tracking: float = param(
-        0.1, lo=0.0, hi=10.0, doc="composite: force per m/s of tracking error, N s/m (0: off)"
-    )
-    confidence: float = param(
-        30.0, lo=0.0, hi=1e6, doc="composite: likelihood ratio a change must exceed"
-    )
+    method: int = param(0, lo=0, hi=len(METHODS), doc=method_number_doc())
     pause: int = param(0, lo=0, hi=1, doc="1: samples are ignored, the weights stay")
     reset: int = param(0, lo=0, hi=1, doc="1: back to the offline weights (then reads 0 again)")
 
@@ -81,7 +60,8 @@ GROUPS: dict[str, type] = {
     "failsafe": FailsafeParams,
     "fence": FenceParams,
     "model": ModelParams,
-    "online": OnlineParams,
+    "online": OnlineSwitches,
+    "online_settings": OnlineSettings,
     "estimator": EstimatorParams,
     "land_detector": LandDetectorParams,
 }
@@ -121,14 +101,7 @@ NAMES: dict[str, tuple[str, str]] = {
     "GFX_GE_MODEL": ("model", "model"),
     "GFX_GE_RHO": ("model", "rho"),
     "GFX_OL_METHOD": ("online", "method"),
-    "GFX_OL_LR": ("online", "learning_rate"),
-    "GFX_OL_LAMBDA": ("online", "penalty"),
-    "GFX_OL_MARGIN": ("online", "margin"),
-    "GFX_OL_FORGET": ("online", "forgetting"),
-    "GFX_OL_RLS_P0": ("online", "rls_covariance"),
-    "GFX_OL_RLS_SC": ("online", "rls_scale_sd"),
-    "GFX_OL_TRACK": ("online", "tracking"),
-    "GFX_OL_CONF": ("online", "confidence"),
+    **{name: ("online_settings", field) for name, field in tuned_in_flight().items()},
     "GFX_OL_PAUSE": ("online", "pause"),
     "GFX_OL_RESET": ("online", "reset"),
     "EKF2_EV_CTRL": ("estimator", "ev_ctrl"),
@@ -314,8 +287,15 @@ class ParamStore:
     def estimator(self) -> EstimatorParams:
         return self.group("estimator")
 
-    def online(self) -> OnlineParams:
+    def online(self) -> OnlineSwitches:
         return self.group("online")
+
+    def online_settings(self) -> OnlineSettings | None:
+        """The online method and hyperparameters the parameters ask for; None when off."""
+        method = method_of_number(self.online().method)
+        if method is None:
+            return None
+        return dataclasses.replace(self.group("online_settings"), method=method)
 
     def model(self) -> tuple[str, float]:
         chosen = self.group("model")

@@ -18,7 +18,9 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from autopilot.control.ground_models import MODEL_NAMES
+from autopilot.identity import IDENTITIES
 from learner.online.names import METHODS
+from learner.online.settings import tuned_in_flight
 from simbridge.config import ConfigError
 
 DEFAULT_MAX_FLIGHT_S = 900.0  # a flight ends (exit code 3) after this many simulated seconds
@@ -26,7 +28,6 @@ DEFAULT_SIM_URL = "tcp:127.0.0.1:4560"  # the PX4 simulator protocol's port
 DEFAULT_GCS_URLS = ("udpout:127.0.0.1:14550", "udpin:0.0.0.0:14540")  # QGroundControl; MAVSDK
 DEFAULT_PARAMS_FILE = Path("logs") / "params.yaml"
 NO_PARAMS_FILE = "none"  # --params-file none: nothing persists
-IDENTITIES = ("px4", "ardupilot")
 
 
 def flight_seconds(text: str) -> float:
@@ -94,7 +95,9 @@ class FlightRequest:
     )
     no_gcs: bool = option(False, "no ground-station endpoint at all")
     identity: str = option(
-        "px4", "autopilot type and mode numbering in HEARTBEAT (default: px4)", choices=IDENTITIES
+        "px4",
+        "autopilot type and mode numbering in HEARTBEAT (default: px4)",
+        choices=tuple(IDENTITIES),
     )
     params_file: Path = option(
         DEFAULT_PARAMS_FILE,
@@ -127,7 +130,7 @@ class FlightRequest:
     online: str | None = option(
         None,
         f"adapt the neural model in flight: {', '.join(METHODS)} (parameter GFX_OL_METHOD; "
-        "hyperparameters GFX_OL_LR, GFX_OL_LAMBDA, GFX_OL_MARGIN, GFX_OL_FORGET via --param)",
+        f"hyperparameters {', '.join(tuned_in_flight())} via --param)",
         choices=METHODS,
         metavar="METHOD",
         section="online learning",

@@ -28,7 +28,6 @@ from autopilot.commander.commander import (
     Phase,
     command,
 )
-from autopilot.commander.modes import FlightMode
 from autopilot.control.controller import (
     ControlOutput,
     control,
@@ -51,6 +50,7 @@ from autopilot.estimation.navigation import Navigation
 from autopilot.flight_config import AutopilotConfig, Flight
 from autopilot.gcs.ground_station import GroundStation, StepInput
 from autopilot.gcs.link import GcsLink
+from autopilot.identity import identity_named
 from autopilot.nav_metrics import estimation_error
 from autopilot.online.learning_sample import learning_sample
 from autopilot.online.online_control import OnlineControl, vertical_tracking_error
@@ -61,7 +61,7 @@ from autopilot.simlink import LinkLost, SimLink
 from autopilot.summary import MODES, FlightTrace, flight_figures, trace_log
 from autopilot.truth import true_height_m, true_state
 from autopilot.tuning import Tuning
-from autopilot.types import FlightState, Setpoint, Step
+from autopilot.types import FlightMode, FlightState, Setpoint, Step
 from simbridge.frames import Vec3
 from simbridge.rotors import Quad
 
@@ -152,7 +152,9 @@ def _open(config: AutopilotConfig, trace: FlightTrace) -> Parts:
         recorder.event(text, "WARN" if text.startswith("failsafe") else "INFO", t)
 
     gcs = GcsLink(list(config.gcs_urls), config.signing)
-    station = GroundStation(gcs, config.params, config.identity, config.origin, on_event)
+    station = GroundStation(
+        gcs, config.params, identity_named(config.identity), config.origin, on_event
+    )
     # before the link: the simulator's clock runs from the connection to the first reply
     gc.collect()
     gc.freeze()  # what exists now (modules, models, the world) is never scanned again

@@ -1,9 +1,10 @@
-"""What every room of the autopilot passes around: the vehicle's state, a setpoint, and one
-lockstep step's messages from the simulator."""
+"""What every room of the autopilot passes around: the vehicle's state, a setpoint, the flight
+mode, and one lockstep step's messages from the simulator."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 from simbridge.frames import Quat, Vec3
@@ -23,6 +24,19 @@ class Setpoint:
     velocity_m_s: Vec3 = (0.0, 0.0, 0.0)
     acceleration_m_s2: Vec3 = (0.0, 0.0, 0.0)
     yaw_rad: float = 0.0
+
+
+class FlightMode(StrEnum):
+    """What a ground station chose; each identity encodes it in HEARTBEAT.custom_mode
+    (autopilot/identity.py)."""
+
+    HOLD = "hold"  # hold position (on the ground: wait)
+    MISSION = "mission"
+    TAKEOFF = "takeoff"
+    LAND = "land"
+    RETURN = "return"
+    OFFBOARD = "offboard"
+    GUIDED = "guided"  # go to a target, then hold there (ArduCopter's Guided; PX4's reposition)
 
 
 @dataclass

@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 from autopilot.commander.mission_items import Home
+from autopilot.identity import IDENTITIES as BY_NAME
 from mission.plans.formats import load_mission_file
 from simbridge.frames import geodetic_to_local
 from simbridge.launch import start_sim
@@ -34,7 +35,7 @@ os.environ.setdefault("MAVLINK20", "1")
 
 
 EXAMPLES = REPO / "mission" / "examples"
-IDENTITIES = ("px4", "ardupilot")
+IDENTITIES = tuple(BY_NAME)  # as `--identity` names them
 # Ten times real time: a flight takes 5-7 s wall. As fast as it can (10-25 times here) both
 # clients fly it too, in 3-6 s, but the simulator and the autopilot then take both cores,
 # from the client and from whatever else runs.

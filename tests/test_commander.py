@@ -14,7 +14,8 @@ from autopilot.commander.commander import (
     limited_setpoint,
 )
 from autopilot.commander.mission_items import PlanStep
-from autopilot.commander.modes import FlightMode, custom_mode, decode_mode
+from autopilot.identity import ARDUPILOT, PX4
+from autopilot.types import FlightMode
 
 REST = 0.0126
 PARAMS = CommanderParams(spin_up_s=0.2, takeoff_altitude_m=1.0, cruise_speed_m_s=0.5)
@@ -102,15 +103,22 @@ def test_requests_are_idempotent_and_refusals_say_why():
 
 @pytest.mark.parametrize("mode", list(FlightMode))
 def test_mode_numbers_round_trip_under_both_identities(mode):
-    px4 = custom_mode(mode, "px4")
+    px4 = PX4.custom_mode(mode)
     as_px4 = FlightMode.HOLD if mode == FlightMode.GUIDED else mode  # a reposition: AUTO.LOITER
-    assert decode_mode("px4", px4) == as_px4  # SET_MODE's packed form
-    assert decode_mode("px4", (px4 >> 16) & 0xFF, (px4 >> 24) & 0xFF) == as_px4  # DO_SET_MODE
+    assert PX4.decode_mode(px4, None) == as_px4  # SET_MODE's packed form
+    assert PX4.decode_mode((px4 >> 16) & 0xFF, (px4 >> 24) & 0xFF) == as_px4  # DO_SET_MODE
     # ArduCopter has no take-off or offboard mode: both are flown in Guided
     as_ardupilot = FlightMode.GUIDED if mode in (FlightMode.TAKEOFF, FlightMode.OFFBOARD) else mode
-    assert decode_mode("ardupilot", custom_mode(mode, "ardupilot")) == as_ardupilot
-    assert custom_mode(FlightMode.MISSION, "px4") == 0x04040000
-    assert custom_mode(FlightMode.RETURN, "ardupilot") == 6
+    assert ARDUPILOT.decode_mode(ARDUPILOT.custom_mode(mode), None) == as_ardupilot
+    assert PX4.custom_mode(FlightMode.MISSION) == 0x04040000
+    assert ARDUPILOT.custom_mode(FlightMode.RETURN) == 6
+
+
+def test_do_set_mode_reads_the_sub_mode_only_under_px4():
+    assert PX4.mode_from_command(4.0, 6.0) == (FlightMode.LAND, "main mode 4 sub 6")
+    assert PX4.mode_from_command(4.0, float("nan")) == (None, "main mode 4 sub 0")
+    assert ARDUPILOT.mode_from_command(9.0, 6.0) == (FlightMode.LAND, "custom mode 9")
+    assert ARDUPILOT.mode_from_command(16.0, 0.0)[0] == FlightMode.HOLD  # PosHold: Loiter
 
 
 def test_a_waypoint_never_reached_is_held_anyway_after_its_timeout():

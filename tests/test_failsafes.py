@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from autopilot.commander import requests
-from autopilot.commander.commander import CommanderParams, CommanderState, Phase
+from autopilot.commander.commander import CommanderState, Phase
+from autopilot.commander.commander_params import CommanderParams
 from autopilot.commander.failsafes import (
     ACTION_NONE,
     ACTION_RETURN,
@@ -12,7 +13,7 @@ from autopilot.commander.failsafes import (
     check_failsafes,
 )
 from autopilot.commander.mission_items import Geofence
-from autopilot.commander.modes import FlightMode
+from autopilot.types import FlightMode
 
 HOME = (0.0, 0.0, 0.0126)
 

@@ -213,18 +213,20 @@ def test_selection_rule_rejects_a_fit_on_its_bounds() -> None:
 
 
 def test_the_measured_noise_floor_is_the_white_one_for_white_noise_and_more_for_coloured() -> None:
-    from learner.gap.residual import gap_over_floor_ms, measured_floor_ms
+    from learner.gap.residual import gap_over_floor_ms, measured_floor_ms, white_floor_ms
 
     rng = np.random.default_rng(3)
     n, dt, sd = 60000, 0.01, 0.005  # 100 Hz, a 0.1 s window of 10 rows, 5 mN per component
     segment = np.zeros(n, dtype=int)
     white = rng.normal(0.0, sd, (n, 3))
-    assert measured_floor_ms(white, segment, dt) == pytest.approx(3 * sd**2 / 10, rel=0.05)
+    white_floor = white_floor_ms(sd**2, dt)
+    assert white_floor == pytest.approx(3 * sd**2 / 10)
+    assert measured_floor_ms(white, segment, dt) == pytest.approx(white_floor, rel=0.05)
     coloured = np.zeros((n, 3))  # AR(1) with a 0.1 s correlation time, the same variance
     phi = np.exp(-dt / 0.1)
     for k in range(1, n):
         coloured[k] = phi * coloured[k - 1] + np.sqrt(1 - phi**2) * white[k]
-    assert measured_floor_ms(coloured, segment, dt) > 3 * 3 * sd**2 / 10
+    assert measured_floor_ms(coloured, segment, dt) > 3 * white_floor
     # a steady force is no noise: its gap stands out of the measured floor whole
     steady = coloured + np.array([0.0, 0.0, 0.02])
     floor = measured_floor_ms(steady, segment, dt)

@@ -12,7 +12,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from autopilot.commander import guided, requests
-from autopilot.commander.commander import CommanderParams, CommanderState, Phase, command
+from autopilot.commander.commander import CommanderState, Phase, command
+from autopilot.commander.commander_params import CommanderParams
 from autopilot.commander.mission_items import (
     NAV_WAYPOINT,
     Geofence,
@@ -21,9 +22,10 @@ from autopilot.commander.mission_items import (
     is_home_row,
     item_at,
 )
-from autopilot.commander.modes import FlightMode
 from autopilot.commander.offboard import Refused, follow, global_target, local_target
+from autopilot.identity import ARDUPILOT, PX4, Identity
 from autopilot.params import ParamStore
+from autopilot.types import FlightMode
 
 REST = 0.0126
 ORIGIN = (59.3498, 18.0707, 28.0)
@@ -36,7 +38,7 @@ def local(frame: int, mask: int, *fields: float) -> mav.MAVLink_message:
     return mav.MAVLink_set_position_target_local_ned_message(0, 1, 1, frame, mask, *fields)
 
 
-def context(identity: str, fence: Geofence | None = None) -> guided.Context:
+def context(identity: Identity, fence: Geofence | None = None) -> guided.Context:
     """Flying at 1 m over home, the surface at z = 0."""
     fence = fence or Geofence()
     return guided.Context(
@@ -107,13 +109,13 @@ def test_body_frame_offsets_turn_with_the_heading():
 def test_what_cannot_be_flown_is_refused_saying_why(frame, mask, why):
     with pytest.raises(Refused, match=why):
         local_target(frame, mask, (1.0,) * 11, (0.0, 0.0, 1.0), 0.0)
-    s, refused = guided.setpoint(local(frame, mask, *(1.0,) * 11), flying(), context("px4"))
+    s, refused = guided.setpoint(local(frame, mask, *(1.0,) * 11), flying(), context(PX4))
     assert why in refused and s.offboard is None
 
 
 def test_offboard_velocity_flies_and_ardupilot_holds_in_guided_when_it_stops():
     params = CommanderParams()
-    ctx = context("ardupilot")
+    ctx = context(ARDUPILOT)
     s = requests.dataclasses.replace(flying(FlightMode.GUIDED), hold_mode=FlightMode.GUIDED)
     message = local(1, VELOCITY_ONLY, 0, 0, 0, 1.0, 0, 0, 0, 0, 0, 0.0, 0)
     s, refused = guided.setpoint(message, s, ctx)
@@ -130,22 +132,22 @@ def test_go_to_needs_the_air_and_the_fence_and_flies_in_the_identitys_mode():
         1, 1, 6, 192, 0, 0, -1, 1, 0, NAN, round(here[0] * 1e7), round(here[1] * 1e7) + 300, 1.5
     )
     grounded, _ = requests.arm(CommanderState(), 0.0, (0.0, 0.0, REST), None, False)
-    _, verdict = guided.reposition(message, grounded, context("px4"))
+    _, verdict = guided.reposition(message, grounded, context(PX4))
     assert not verdict.accepted and "not flying" in verdict.reason
-    s, verdict = guided.reposition(message, flying(FlightMode.MISSION), context("px4"))
+    s, verdict = guided.reposition(message, flying(FlightMode.MISSION), context(PX4))
     assert verdict.accepted and s.mode == FlightMode.HOLD
     assert s.target_m == pytest.approx((1.70, 0.0, 1.5), abs=0.01)
-    s, verdict = guided.reposition(message, flying(), context("ardupilot"))
+    s, verdict = guided.reposition(message, flying(), context(ARDUPILOT))
     assert verdict.accepted and s.mode == FlightMode.GUIDED
-    fenced = context("px4", fence=Geofence(max_radius_m=1.0))
+    fenced = context(PX4, fence=Geofence(max_radius_m=1.0))
     _, verdict = guided.reposition(message, flying(), fenced)
     assert not verdict.accepted and "geofence" in verdict.reason
     item = mav.MAVLink_mission_item_int_message(
         1, 1, 0, 6, 16, 2, 0, 0, 0, 0, 0, round(here[0] * 1e7), round(here[1] * 1e7), 1.0
     )
-    _, verdict = guided.guided_item(item, flying(FlightMode.HOLD), context("ardupilot"))
+    _, verdict = guided.guided_item(item, flying(FlightMode.HOLD), context(ARDUPILOT))
     assert not verdict.accepted and "switch to guided" in verdict.reason
-    s, verdict = guided.guided_item(item, flying(FlightMode.GUIDED), context("ardupilot"))
+    s, verdict = guided.guided_item(item, flying(FlightMode.GUIDED), context(ARDUPILOT))
     assert verdict.accepted and s.target_m == pytest.approx((0.0, 0.0, 1.0), abs=1e-6)
 
 

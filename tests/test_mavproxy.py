@@ -18,7 +18,9 @@ from pathlib import Path
 
 import pytest
 from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from autopilot.identity import identity_named
 from tests.client_vehicle import (
     EXAMPLES,
     FLIGHT_WALL_S,
@@ -165,7 +167,7 @@ def test_mavproxy_loads_the_wpl_file_arms_starts_it_and_sees_every_item_reached(
         mavproxy.expect(lambda s: s == "Got MISSION_ACK: TYPE_MISSION: ACCEPTED", "mission ack")
         mavproxy.send("arm throttle")
         mavproxy.expect(lambda s: s == "ARMED", "arming")
-        if identity == "ardupilot":
+        if identity_named(identity).autopilot == mav.MAV_AUTOPILOT_ARDUPILOTMEGA:
             mavproxy.send("mode AUTO")
             mavproxy.expect(lambda s: s == "Mode AUTO", "AUTO mode")
         else:  # `mode AUTO` means nothing under PX4: AUTO.MISSION by number
@@ -181,7 +183,7 @@ def test_mavproxy_loads_the_wpl_file_arms_starts_it_and_sees_every_item_reached(
         listener.close()
     # MAVProxy uploads the file's row 0, home, as item 0: ArduCopter keeps it as home; PX4
     # flies it, and it is reached on the ground, where the vehicle stands.
-    expected = list(range(1 if identity == "ardupilot" else 0, 9))
+    expected = list(range(1 if identity_named(identity).home_is_item_0 else 0, 9))
     assert listener.reached == expected, "\n".join(mavproxy.transcript[-40:])
     assert summary["landed"] and summary["landing_error_m"] < LANDED_WITHIN_M, summary
     assert summary["mission_items"] == 9

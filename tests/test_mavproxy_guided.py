@@ -18,6 +18,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from autopilot.commander.mission_items import DO_CHANGE_SPEED, NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT
+from autopilot.identity import identity_named
 from simbridge.frames import geodetic_to_local, local_to_geodetic
 from tests.client_vehicle import (
     FLIGHT_WALL_S,
@@ -148,7 +149,7 @@ def test_mavproxy_flies_the_8_m_square_at_default_parameters_every_corner(
         upload_s = time.monotonic() - t0
         mavproxy.send("arm throttle")
         mavproxy.expect(lambda s: s == "ARMED", "arming")
-        if identity == "ardupilot":
+        if identity_named(identity).autopilot == mav.MAV_AUTOPILOT_ARDUPILOTMEGA:
             mavproxy.send("mode AUTO")
         else:
             mavproxy.send("long DO_SET_MODE 1 4 4")

@@ -20,8 +20,10 @@ from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync
 from mavsdk.asyncio.plugins.param import ParamAsync
 from mavsdk.asyncio.plugins.telemetry import LandedState, TelemetryAsync
+from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from autopilot.commander.mission_items import DO_CHANGE_SPEED, NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT
+from autopilot.identity import identity_named
 from tests.client_vehicle import (
     EXAMPLES,
     FLIGHT_WALL_S,
@@ -35,6 +37,13 @@ from tests.client_vehicle import (
 )
 
 __all__ = ["vehicle"]  # the fixture, used by name
+
+
+# MAVSDK's autopilot type for HEARTBEAT.autopilot
+MAVSDK_AUTOPILOT = {
+    mav.MAV_AUTOPILOT_PX4: Autopilot.PX4,
+    mav.MAV_AUTOPILOT_ARDUPILOTMEGA: Autopilot.ARDUPILOT,
+}
 
 
 async def within(what: str, timeout_s: float, awaitable: Any) -> Any:
@@ -91,7 +100,7 @@ def mavsdk_square(home_lat: float, home_lon: float, identity: str) -> list[Missi
             places.append(item)
             speeds.append(speed)  # the speed flown to it
     items = []
-    if identity == "ardupilot":
+    if identity_named(identity).home_is_item_0:
         items.append(
             MissionItem(
                 latitude_deg=home_lat,
@@ -151,7 +160,7 @@ async def with_mavsdk(
         await within("connect", 5, sdk.add_any_connection(f"udpout://127.0.0.1:{port}"))
         system = await within("discovery", 15, sdk.first_autopilot(timeout_s=10.0))
         assert system is not None, "MAVSDK found no autopilot within 10 s"
-        expected = Autopilot.PX4 if identity == "px4" else Autopilot.ARDUPILOT
+        expected = MAVSDK_AUTOPILOT[identity_named(identity).autopilot]
         assert await system.autopilot_type() == expected
         client = Client(
             TelemetryAsync(system),
@@ -286,7 +295,7 @@ def test_mavsdk_uploads_the_square_takes_off_flies_it_lands_and_sees_the_disarm(
     wall = time.monotonic() - t0
 
     items, progress = result["items"], result["progress"]
-    first_flown = 1 if identity == "ardupilot" else 0  # ArduCopter's item 0 is home
+    first_flown = 1 if identity_named(identity).home_is_item_0 else 0
     assert set(range(first_flown, len(items) + 1)) <= set(progress), progress
     assert progress == sorted(progress), f"progress went backwards: {progress}"
     check_landing(result, items[-1].latitude_deg, items[-1].longitude_deg)
@@ -330,7 +339,7 @@ def test_mavsdk_imports_square_plan_and_flies_it_as_raw_items(vehicle, identity)
 
     items, progress = result["items"], result["progress"]
     plan = square_items()
-    home_row = 1 if identity == "ardupilot" else 0
+    home_row = 1 if identity_named(identity).home_is_item_0 else 0
     assert len(items) == len(plan) + home_row
     assert [i.command for i in items[home_row:]] == [i.command for i in plan]
     assert set(range(home_row + 1, len(items) + 1)) <= set(progress), progress

@@ -11,13 +11,13 @@ import pytest
 import torch
 
 from autopilot.online.online_learner import OnlineLearner
-from autopilot.params import ParamStore, check_value
+from autopilot.params import ORDER, SPECS, ParamStore, check_value, float32
 from learner.model import load_model
 from learner.network import CONTROL_COLUMNS
 from learner.online.guards import check_update
 from learner.online.memory import load_memory
 from learner.online.methods import Anchor, forward_np, update
-from learner.online.names import NETWORK_METHODS
+from learner.online.names import METHODS, NETWORK_METHODS, method_number, method_of_number
 from learner.online.session import OnlineSession
 from learner.online.settings import OnlineSettings
 from simbridge.config import ConfigError
@@ -236,7 +236,8 @@ def test_online_parameters_have_ranges_and_the_options_clear_errors(tmp_path):
     )
     assert check_value("GFX_OL_METHOD", 8) is not None  # 7: composite, the last
     store = ParamStore(None, {"GFX_OL_METHOD": 6, "GFX_OL_FORGET": 0.9})
-    assert store.online().method == 6 and store.online().forgetting == pytest.approx(0.9)
+    settings = store.online_settings()
+    assert settings.method == "rls" and settings.forgetting == pytest.approx(0.9)
     with pytest.raises(ConfigError, match="online steps: 0 is outside the allowed range"):
         dataclasses.replace(OnlineSettings(), steps=0)
     with pytest.raises(ConfigError, match="unknown method 'sgd'"):
@@ -270,6 +271,36 @@ def test_online_parameters_have_ranges_and_the_options_clear_errors(tmp_path):
     adapted = OnlineLearner(BASE, OnlineSettings()).save(tmp_path / "adapted.npz")
     (tmp_path / "adapted.offline.npz").unlink()
     assert "adapted.offline.npz is missing" in refusal(str(adapted), "constraint")
+
+
+def test_a_ground_station_tunes_the_settings_the_learner_uses_within_their_declared_ranges():
+    names = sorted(n for n in ORDER if n.startswith("GFX_OL_"))
+    assert names == [
+        "GFX_OL_CONF", "GFX_OL_FORGET", "GFX_OL_LAMBDA", "GFX_OL_LR", "GFX_OL_MARGIN",
+        "GFX_OL_METHOD", "GFX_OL_PAUSE", "GFX_OL_RESET", "GFX_OL_RLS_P0", "GFX_OL_RLS_SC",
+        "GFX_OL_TRACK",
+    ]  # fmt: skip
+    assert ParamStore(None).online_settings() is None  # GFX_OL_METHOD 0: off
+    numbered = range(int(SPECS["GFX_OL_METHOD"].hi) + 1)
+    assert [method_of_number(k) for k in numbered] == [None, *METHODS]
+    for method in METHODS:  # what `--online METHOD` sets is what the learner runs
+        store = ParamStore(None, {"GFX_OL_METHOD": method_number(method)})
+        assert store.online_settings().method == method
+    tuned = [f for f in dataclasses.fields(OnlineSettings) if "mavlink" in f.metadata]
+    assert len(tuned) == len(names) - 3  # all but the method, pause and reset
+    for f in tuned:
+        spec = SPECS[f.metadata["mavlink"]]
+        assert (spec.default, spec.lo, spec.hi) == (f.default, f.metadata["lo"], f.metadata["hi"])
+        assert getattr(ParamStore(None, {"GFX_OL_METHOD": 1}).online_settings(), f.name) == (
+            float32(f.default)
+        )
+        for value in (spec.lo, spec.hi):  # either end of the range reaches the learner
+            store = ParamStore(None, {"GFX_OL_METHOD": 1})
+            assert store.set(spec.name, value) is None
+            assert getattr(store.online_settings(), f.name) == float32(value)
+        below = spec.lo / 2 if spec.lo > 0 else -1.0
+        assert "outside the allowed range" in (check_value(spec.name, below) or "")
+        assert "outside the allowed range" in (check_value(spec.name, spec.hi * 2) or "")
 
 
 def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_paused(tmp_path):

@@ -1,10 +1,11 @@
 """The commander: flight modes, arming, missions, take-off, landing, as pure functions.
 
 Two things describe the vehicle. The flight mode is what a ground station chose (hold, mission,
-takeoff, land, return, offboard, guided; `autopilot.commander.modes`). The phase is what the vehicle
-is doing: DISARMED -> ARMED (idling on the ground) -> TAKING_OFF -> FLYING / HOLDING -> LANDING ->
-LANDED (touchdown held for `touchdown_s`: rotors off, disarmed). Requests from a ground station
-(`requests.py`) change the state; `command` steps it once per control step.
+takeoff, land, return, offboard, guided; `autopilot.types.FlightMode`). The phase is what the
+vehicle is doing: DISARMED -> ARMED (idling on the ground) -> TAKING_OFF -> FLYING / HOLDING ->
+LANDING -> LANDED (touchdown held for `touchdown_s`: rotors off, disarmed). Requests from a ground
+station (`requests.py`) change the state; `command` steps it once per control step, each mode by
+its step in `MODE_STEPS`.
 
 Setpoints lead the vehicle towards their target by at most what the mission speeds allow
 (`limited_setpoint`), so DO_CHANGE_SPEED and MPC_XY_CRUISE mean what they say.
@@ -14,14 +15,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import NamedTuple
 
+from autopilot.commander.commander_params import CommanderParams
 from autopilot.commander.mission_items import PlanStep
-from autopilot.commander.modes import FlightMode
 from autopilot.commander.offboard import Target, Track, follow
-from autopilot.types import Setpoint
-from simbridge.config import param
+from autopilot.types import FlightMode, Setpoint
 from simbridge.frames import Vec3
 
 
@@ -36,47 +38,6 @@ class Phase(StrEnum):
 
 
 AIRBORNE_PHASES = (Phase.TAKING_OFF, Phase.FLYING, Phase.HOLDING, Phase.LANDING)
-
-
-@dataclass(frozen=True)
-class CommanderParams:
-    spin_up_s: float = param(
-        0.2, unit="s", lo=0.0, hi=10.0, doc="armed on the ground before take-off"
-    )
-    takeoff_altitude_m: float = param(1.0, unit="m", lo=0.05, hi=100.0, doc="above home")
-    takeoff_acceptance_m: float = param(
-        0.05, unit="m", lo=0.001, hi=10.0, doc="take-off reached within"
-    )
-    acceptance_radius_m: float = param(
-        0.05, unit="m", lo=0.001, hi=100.0, doc="waypoint reached within (item's 0)"
-    )
-    waypoint_timeout_s: float = param(
-        0.0, unit="s", lo=0.0, hi=3600.0, doc="not reached this long after the setpoint got "
-        "there: held anyway (0: wait forever)",
-    )  # fmt: skip
-    cruise_speed_m_s: float = param(0.5, unit="m/s", lo=0.01, hi=20.0, doc="horizontal speed")
-    climb_speed_m_s: float = param(0.5, unit="m/s", lo=0.01, hi=10.0, doc="vertical speed up")
-    descent_speed_m_s: float = param(
-        0.5, unit="m/s", lo=0.01, hi=10.0, doc="vertical speed down (not landing)"
-    )
-    land_speed_m_s: float = param(
-        0.1, unit="m/s", lo=0.01, hi=3.0, doc="descent rate of the landing setpoint"
-    )
-    return_altitude_m: float = param(
-        1.0, unit="m", lo=0.0, hi=100.0, doc="lowest altitude above home to return at"
-    )
-    touchdown_margin_m: float = param(
-        0.004, unit="m", lo=0.0, hi=0.1, doc="height above resting that counts as down"
-    )
-    touchdown_s: float = param(
-        0.1, unit="s", lo=0.0, hi=5.0, doc="down this long: touchdown, disarm"
-    )
-    landing_floor_m: float = param(
-        0.05, unit="m", lo=0.0, hi=1.0, doc="the landing setpoint stops this far below resting"
-    )
-    offboard_timeout_s: float = param(
-        0.5, unit="s", lo=0.05, hi=60.0, doc="offboard setpoints older than this: hold"
-    )
 
 
 @dataclass(frozen=True)
@@ -233,12 +194,18 @@ def _next_item(state: CommanderState, time_s: float, position: Vec3) -> Commande
     return state.evolve(current=state.current + 1, target_m=None, reached_s=None)
 
 
+def _return_target(state: CommanderState, params: CommanderParams, position: Vec3) -> Vec3:
+    """Over home, at the higher of here and the return altitude above home."""
+    home = state.home_m or position
+    return (home[0], home[1], max(position[2], home[2] + params.return_altitude_m))
+
+
 def _mission_target(
     state: CommanderState, params: CommanderParams, step: PlanStep, position: Vec3
 ) -> CommanderState:
     """Aim the setpoint at the mission item `step` (once, when it becomes current)."""
-    home = state.home_m or position
     if step.kind == "takeoff":
+        home = state.home_m or position
         xy = step.position_m[:2] if step.position_m is not None else position[:2]
         altitude = step.altitude_m if step.altitude_m > 0.0 else params.takeoff_altitude_m
         return go_to(state, (xy[0], xy[1], home[2] + altitude), position, step.yaw_deg)
@@ -247,9 +214,7 @@ def _mission_target(
     if step.kind == "land":
         xy = step.position_m[:2] if step.position_m is not None else position[:2]
         return go_to(state, (xy[0], xy[1], position[2]), position, step.yaw_deg)
-    # return: home at the higher of here and the return altitude
-    z = max(position[2], home[2] + params.return_altitude_m)
-    return go_to(state, (home[0], home[1], z), position)
+    return go_to(state, _return_target(state, params, position), position)
 
 
 def _fly_mission(
@@ -306,6 +271,16 @@ def _reached(
     return state
 
 
+class Now(NamedTuple):
+    """What one commander step knows of the vehicle."""
+
+    time_s: float
+    position_m: Vec3
+    height_m: float  # above the surface under the vehicle
+    resting_height_m: float  # the height the vehicle rests at on the ground
+    ground_contact: bool  # the land detector's verdict (autopilot/control/land_detector.py)
+
+
 def command(
     state: CommanderState,
     params: CommanderParams,
@@ -319,135 +294,161 @@ def command(
 ) -> Command:
     """One commander step at `time_s` from the vehicle's position and height above the surface;
     `ground_contact`: the land detector's verdict (autopilot/control/land_detector.py)."""
-    phase = state.phase
-    if phase in (Phase.DISARMED, Phase.LANDED):
+    if state.phase in (Phase.DISARMED, Phase.LANDED):
         return Command(state, None, False)
+    now = Now(time_s, position_m, height_m, resting_height_m, ground_contact)
     events: list[str] = []
-    ground_reached: tuple[int, ...] = ()
-    if phase == Phase.ARMED:
-        wants_air = state.mode in (FlightMode.TAKEOFF, FlightMode.MISSION, FlightMode.OFFBOARD)
-        if state.mode == FlightMode.MISSION and state.mission_done:
-            wants_air = False
-        if not wants_air or time_s - state.since_s < params.spin_up_s:
-            return Command(state, None, True)
-        if state.mode == FlightMode.MISSION:
-            state, skipped = _skip_where_it_stands(state, params, position_m)
-            if state.mission_done:
-                return Command(state, None, True, skipped, ("mission complete",))
-            ground_reached = skipped
-        state = phase_to(state, Phase.TAKING_OFF, time_s, carrot_m=position_m, target_m=None)
-        if state.mode == FlightMode.TAKEOFF or _climb_first(state):
-            home = state.home_m or position_m
-            altitude = state.takeoff_altitude_m or params.takeoff_altitude_m
-            target = (position_m[0], position_m[1], home[2] + altitude)
-            state = go_to(state, target, position_m)
-        events.append("taking off")
-    reached: tuple[int, ...] = ground_reached
+    reached: tuple[int, ...] = ()
+    if state.phase == Phase.ARMED:
+        state, on_ground, reached = _leave_ground(state, params, now, events)
+        if on_ground is not None:
+            return on_ground
     if state.phase == Phase.LANDING:
-        return _land(
-            state, params, time_s, position_m, height_m, resting_height_m, events, ground_contact
-        )
+        return _land(state, params, now, events)
     if state.mode == FlightMode.OFFBOARD:
-        if time_s - state.offboard_s <= params.offboard_timeout_s and state.offboard is not None:
-            phase = Phase.FLYING if state.phase != Phase.TAKING_OFF or position_m[2] > (
-                (state.home_m or position_m)[2] + params.takeoff_acceptance_m
-            ) else Phase.TAKING_OFF  # fmt: skip
-            if phase != state.phase:
-                state = phase_to(state, phase, time_s)
-            setpoint, track = follow(
-                state.offboard,
-                state.offboard_track,
-                position_m,
-                math.radians(state.yaw_deg),
-                time_s,
-            )
-            state = state.evolve(
-                carrot_m=setpoint.position_m,
-                offboard_track=track,
-                yaw_deg=math.degrees(setpoint.yaw_rad),
-            )
-            return Command(state, setpoint, True, events=tuple(events))
-        state = state.evolve(
-            mode=state.hold_mode, target_m=position_m, carrot_m=None, offboard_track=None
-        )
-        state = go_to(state, position_m, position_m)
-        events.append(f"offboard setpoints stopped: holding in {state.hold_mode}")
-    if state.mode == FlightMode.MISSION and not _climb_first(state):
-        state, flown = _fly_mission(state, params, time_s, position_m)
-        reached += flown
-        if state.phase == Phase.LANDING:
-            return _land(
-                state,
-                params,
-                time_s,
-                position_m,
-                height_m,
-                resting_height_m,
-                events,
-                ground_contact,
-            )
-        if state.mission_done:
-            events.append("mission complete")
-    elif state.mode == FlightMode.LAND:
-        return _land(
-            start_landing(state, time_s, position_m),
-            params, time_s, position_m, height_m, resting_height_m, events, ground_contact,
-        )  # fmt: skip
-    elif state.mode == FlightMode.RETURN:
-        home = state.home_m or position_m
-        if state.target_m is None:
-            z = max(position_m[2], home[2] + params.return_altitude_m)
-            state = go_to(state, (home[0], home[1], z), position_m)
-        if state.reached_s is not None:
-            return _land(
-                start_landing(state, time_s, position_m, state.target_m),
-                params, time_s, position_m, height_m, resting_height_m, events, ground_contact,
-            )  # fmt: skip
-    elif state.target_m is None:  # HOLD, GUIDED or TAKEOFF without a target: hold here
-        state = go_to(state, position_m, position_m)
-    horizontal = state.speed_m_s or params.cruise_speed_m_s
-    carrot = limited_setpoint(
-        position_m,
-        state.target_m,
-        lead_s,
-        horizontal,
+        state, following = _offboard(state, params, now, events)
+        if following is not None:
+            return following
+    state, flown, texts = MODE_STEPS[state.mode](state, params, now)
+    if state.phase == Phase.LANDING:
+        return _land(state, params, now, events)
+    events += texts
+    horizontal, up, down = (
+        state.speed_m_s or params.cruise_speed_m_s,
         params.climb_speed_m_s,
         params.descent_speed_m_s,
-        vertical_lead_s,
     )
-    state = _reached(state.evolve(carrot_m=carrot), params, time_s, position_m)
-    if state.phase == Phase.TAKING_OFF and state.reached_s is not None:
-        state = phase_to(state, Phase.FLYING, time_s)
-        if state.mode == FlightMode.MISSION and state.plan[state.current].kind != "takeoff":
-            state = state.evolve(target_m=None, reached_s=None)  # on to item 1
+    carrot = limited_setpoint(
+        position_m, state.target_m, lead_s, horizontal, up, down, vertical_lead_s
+    )
+    state = _progress(_reached(state.evolve(carrot_m=carrot), params, time_s, position_m), now)
     if state.mode == FlightMode.TAKEOFF and state.reached_s is not None:
         # also a take-off mode chosen in the air: it climbs to the altitude, then holds
         state = state.evolve(mode=state.hold_mode)
         events.append(f"take-off complete: holding in {state.hold_mode}")
-    if state.phase in (Phase.FLYING, Phase.HOLDING):
-        holding = state.reached_s is not None
-        phase = Phase.HOLDING if holding else Phase.FLYING
-        if phase != state.phase:
-            state = phase_to(state, phase, time_s)
     setpoint = Setpoint(carrot, yaw_rad=math.radians(state.yaw_deg))
-    return Command(state, setpoint, True, reached, tuple(events))
+    return Command(state, setpoint, True, reached + flown, tuple(events))
 
 
-def _land(
-    state: CommanderState,
-    params: CommanderParams,
-    time_s: float,
-    position_m: Vec3,
-    height_m: float,
-    resting_height_m: float,
-    events: list[str],
-    ground_contact: bool = False,
-) -> Command:
+def _leave_ground(
+    state: CommanderState, params: CommanderParams, now: Now, events: list[str]
+) -> tuple[CommanderState, Command | None, tuple[int, ...]]:
+    """ARMED: stay on the ground (a Command) until a mode that flies has spun the rotors up
+    for `spin_up_s`, then take off; also returns the mission items reached on the ground."""
+    wants_air = state.mode in (FlightMode.TAKEOFF, FlightMode.MISSION, FlightMode.OFFBOARD)
+    if state.mode == FlightMode.MISSION and state.mission_done:
+        wants_air = False
+    if not wants_air or now.time_s - state.since_s < params.spin_up_s:
+        return state, Command(state, None, True), ()
+    skipped: tuple[int, ...] = ()
+    if state.mode == FlightMode.MISSION:
+        state, skipped = _skip_where_it_stands(state, params, now.position_m)
+        if state.mission_done:
+            return state, Command(state, None, True, skipped, ("mission complete",)), skipped
+    position = now.position_m
+    state = phase_to(state, Phase.TAKING_OFF, now.time_s, carrot_m=position, target_m=None)
+    if state.mode == FlightMode.TAKEOFF or _climb_first(state):
+        home = state.home_m or position
+        altitude = state.takeoff_altitude_m or params.takeoff_altitude_m
+        state = go_to(state, (position[0], position[1], home[2] + altitude), position)
+    events.append("taking off")
+    return state, None, skipped
+
+
+def _offboard(
+    state: CommanderState, params: CommanderParams, now: Now, events: list[str]
+) -> tuple[CommanderState, Command | None]:
+    """OFFBOARD: follow the setpoints while they keep coming (a Command); once they stop,
+    hold where the vehicle is, in the identity's hold mode."""
+    position = now.position_m
+    if now.time_s - state.offboard_s <= params.offboard_timeout_s and state.offboard is not None:
+        phase = Phase.FLYING if state.phase != Phase.TAKING_OFF or position[2] > (
+            (state.home_m or position)[2] + params.takeoff_acceptance_m
+        ) else Phase.TAKING_OFF  # fmt: skip
+        if phase != state.phase:
+            state = phase_to(state, phase, now.time_s)
+        setpoint, track = follow(
+            state.offboard, state.offboard_track, position, math.radians(state.yaw_deg), now.time_s
+        )
+        state = state.evolve(
+            carrot_m=setpoint.position_m,
+            offboard_track=track,
+            yaw_deg=math.degrees(setpoint.yaw_rad),
+        )
+        return state, Command(state, setpoint, True, events=tuple(events))
+    state = go_to(
+        state.evolve(mode=state.hold_mode, target_m=position, carrot_m=None, offboard_track=None),
+        position,
+        position,
+    )
+    events.append(f"offboard setpoints stopped: holding in {state.hold_mode}")
+    return state, None
+
+
+# A mode's step: the new state (LANDING: the landing takes over), the mission items it
+# reached and what it has to say.
+ModeStep = tuple[CommanderState, tuple[int, ...], tuple[str, ...]]
+
+
+def _hold_step(state: CommanderState, params: CommanderParams, now: Now) -> ModeStep:
+    """Go to the target; without one, hold where the vehicle is."""
+    if state.target_m is None:
+        state = go_to(state, now.position_m, now.position_m)
+    return state, (), ()
+
+
+def _mission_step(state: CommanderState, params: CommanderParams, now: Now) -> ModeStep:
+    if _climb_first(state):
+        return _hold_step(state, params, now)  # to the take-off altitude first
+    state, flown = _fly_mission(state, params, now.time_s, now.position_m)
+    return state, flown, ("mission complete",) if state.mission_done else ()
+
+
+def _land_step(state: CommanderState, params: CommanderParams, now: Now) -> ModeStep:
+    return start_landing(state, now.time_s, now.position_m), (), ()
+
+
+def _return_step(state: CommanderState, params: CommanderParams, now: Now) -> ModeStep:
+    """Fly home at the return altitude, then land there."""
+    if state.target_m is None:
+        state = go_to(state, _return_target(state, params, now.position_m), now.position_m)
+    if state.reached_s is not None:
+        state = start_landing(state, now.time_s, now.position_m, state.target_m)
+    return state, (), ()
+
+
+MODE_STEPS: dict[FlightMode, Callable[[CommanderState, CommanderParams, Now], ModeStep]] = {
+    FlightMode.MISSION: _mission_step,
+    FlightMode.LAND: _land_step,
+    FlightMode.RETURN: _return_step,
+    FlightMode.HOLD: _hold_step,
+    FlightMode.GUIDED: _hold_step,
+    FlightMode.TAKEOFF: _hold_step,
+    FlightMode.OFFBOARD: _hold_step,  # setpoints stopped: held, in the hold mode, by then
+}
+
+
+def _progress(state: CommanderState, now: Now) -> CommanderState:
+    """The phase that follows from the target being reached: a take-off ends (a mission on
+    to its item 1), flying turns to holding and back."""
+    if state.phase == Phase.TAKING_OFF and state.reached_s is not None:
+        state = phase_to(state, Phase.FLYING, now.time_s)
+        if state.mode == FlightMode.MISSION and state.plan[state.current].kind != "takeoff":
+            state = state.evolve(target_m=None, reached_s=None)  # on to item 1
+    if state.phase in (Phase.FLYING, Phase.HOLDING):
+        phase = Phase.HOLDING if state.reached_s is not None else Phase.FLYING
+        if phase != state.phase:
+            state = phase_to(state, phase, now.time_s)
+    return state
+
+
+def _land(state: CommanderState, params: CommanderParams, now: Now, events: list[str]) -> Command:
     """LANDING: a setpoint sinking at the landing speed until the vehicle is down, never
     further than `landing_floor_m` below where the vehicle would rest."""
-    start = state.landing_from_m or position_m
+    time_s, height_m, resting_height_m = now.time_s, now.height_m, now.resting_height_m
+    start = state.landing_from_m or now.position_m
     sink = params.land_speed_m_s
-    floor = position_m[2] - (height_m - resting_height_m) - params.landing_floor_m
+    floor = now.position_m[2] - (height_m - resting_height_m) - params.landing_floor_m
     z = start[2] - sink * (time_s - state.since_s)
     sinking = z > floor
     target = (start[0], start[1], max(z, floor))
@@ -456,9 +457,9 @@ def _land(
         velocity_m_s=(0.0, 0.0, -sink if sinking else 0.0),
         yaw_rad=math.radians(state.yaw_deg),
     )
-    if height_m <= resting_height_m + params.touchdown_margin_m or ground_contact:
+    if height_m <= resting_height_m + params.touchdown_margin_m or now.ground_contact:
         down_since = state.down_since_s if state.down_since_s is not None else time_s
-        if time_s - down_since >= params.touchdown_s or ground_contact:
+        if time_s - down_since >= params.touchdown_s or now.ground_contact:
             reached: tuple[int, ...] = ()
             if state.mode == FlightMode.MISSION and state.plan and not state.mission_done:
                 reached = (state.current,)

@@ -9,9 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from autopilot.commander import requests
-from autopilot.commander.commander import AIRBORNE_PHASES, CommanderParams, CommanderState
+from autopilot.commander.commander import AIRBORNE_PHASES, CommanderState
+from autopilot.commander.commander_params import CommanderParams
 from autopilot.commander.mission_items import Geofence
-from autopilot.commander.modes import FlightMode
+from autopilot.types import FlightMode
 from simbridge.config import param
 from simbridge.frames import Vec3
 

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from autopilot.commander import requests
-from autopilot.commander.commander import CommanderParams, CommanderState
+from autopilot.commander.commander import CommanderState
+from autopilot.commander.commander_params import CommanderParams
 from autopilot.commander.mission_items import Geofence
-from autopilot.commander.modes import FlightMode
 from autopilot.commander.offboard import (
     Refused,
     Target,
@@ -25,12 +25,12 @@ from autopilot.commander.offboard import (
     global_target,
     local_target,
 )
+from autopilot.identity import Identity
+from autopilot.types import FlightMode
 from simbridge.frames import Vec3
 from simbridge.hil import mavlink as mav
 
 DENIED = mav.MAV_RESULT_DENIED
-# ArduCopter's Guided, whatever it is doing in it (heartbeat custom mode 4 for all three)
-GUIDED_MODES = (FlightMode.GUIDED, FlightMode.TAKEOFF, FlightMode.OFFBOARD)
 GO_TO_FRAMES = (
     mav.MAV_FRAME_GLOBAL,
     mav.MAV_FRAME_GLOBAL_RELATIVE_ALT,
@@ -44,7 +44,7 @@ UNSET = 2**31 - 1  # INT32_MAX: COMMAND_INT's x or y not given
 
 @dataclass(frozen=True)
 class Context:
-    identity: str
+    identity: Identity
     origin: tuple[float, float, float]  # the local frame's geodetic origin
     home_m: Vec3
     home_up_m: float  # local z of the surface at home: relative altitudes count from it
@@ -52,10 +52,6 @@ class Context:
     heading_rad: float  # ours: from east, counter-clockwise
     fence: Geofence
     time_s: float
-
-    @property
-    def go_to_mode(self) -> FlightMode:
-        return FlightMode.GUIDED if self.identity == "ardupilot" else FlightMode.HOLD
 
 
 def _fenced(target: Vec3, ctx: Context) -> str | None:
@@ -72,10 +68,10 @@ def _go(
     fenced = _fenced(target, ctx)
     if fenced is not None:
         return cmd, requests.Verdict(DENIED, fenced)
-    if ctx.identity == "ardupilot" and cmd.mode in GUIDED_MODES:
+    if cmd.mode in ctx.identity.guided_modes:
         change_mode = True  # already in Guided
     return requests.reposition(
-        cmd, target, yaw_deg, ctx.go_to_mode, change_mode, ctx.time_s, ctx.position_m
+        cmd, target, yaw_deg, ctx.identity.hold_mode, change_mode, ctx.time_s, ctx.position_m
     )
 
 
@@ -98,7 +94,7 @@ def reposition(
     except Refused as e:
         return cmd, requests.Verdict(DENIED, str(e))
     yaw = None
-    if ctx.identity == "px4" and math.isfinite(m.param4):
+    if ctx.identity.reposition_yaw and math.isfinite(m.param4):
         yaw = 90.0 - math.degrees(m.param4)
     flags = int(m.param2) if math.isfinite(m.param2) else 0
     change = bool(flags & mav.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE)
@@ -121,7 +117,8 @@ def guided_item(
         )
     except Refused as e:
         return cmd, requests.Verdict(DENIED, str(e))
-    return _go(cmd, target, None, ctx.identity != "ardupilot", ctx)
+    # without a Guided mode the item switches to the go-to mode itself
+    return _go(cmd, target, None, not ctx.identity.guided_modes, ctx)
 
 
 def setpoint(m: Any, cmd: CommanderState, ctx: Context) -> tuple[CommanderState, str | None]:
@@ -131,9 +128,9 @@ def setpoint(m: Any, cmd: CommanderState, ctx: Context) -> tuple[CommanderState,
         target = _target(m, ctx)
     except Refused as e:
         return cmd, str(e)
-    if ctx.identity != "ardupilot":
+    if not ctx.identity.guided_modes:
         return requests.offboard_setpoint(cmd, target, ctx.time_s), None  # flown in offboard
-    if cmd.mode not in GUIDED_MODES:
+    if cmd.mode not in ctx.identity.guided_modes:
         return cmd, f"setpoint ignored: in {cmd.mode} mode (switch to GUIDED)"
     if target.position_only:
         cmd, verdict = _go(cmd, target.position_m, _yaw_deg(target), True, ctx)

@@ -10,22 +10,16 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from autopilot.commander.commander import (
-    AIRBORNE_PHASES,
-    CommanderParams,
-    CommanderState,
-    Phase,
-    go_to,
-)
+from autopilot.commander.commander import AIRBORNE_PHASES, CommanderState, Phase, go_to
+from autopilot.commander.commander_params import CommanderParams
 from autopilot.commander.mission_items import PlanStep
-from autopilot.commander.modes import FlightMode
 from autopilot.commander.offboard import Target
+from autopilot.types import FlightMode
 from simbridge.frames import Vec3
 from simbridge.hil import mavlink as mav
 
 ACCEPTED = mav.MAV_RESULT_ACCEPTED
 DENIED = mav.MAV_RESULT_DENIED
-TEMPORARILY_REJECTED = mav.MAV_RESULT_TEMPORARILY_REJECTED
 
 
 @dataclass(frozen=True)
@@ -118,13 +112,24 @@ def load_plan(state: CommanderState, plan: tuple[PlanStep, ...]) -> CommanderSta
 
 
 def set_current(state: CommanderState, seq: int) -> tuple[CommanderState, Verdict]:
-    if not 0 <= seq < len(state.plan):
-        return state, Verdict(DENIED, f"no mission item {seq} (the mission has {len(state.plan)})")
-    if seq == state.current and not state.mission_done:
+    """Fly the mission item numbered `seq` (its number in the uploaded mission) next."""
+    index = next((i for i, step in enumerate(state.plan) if step.seq == seq), None)
+    if index is None:
+        return state, Verdict(DENIED, f"no mission item {seq}")
+    if index == state.current and not state.mission_done:
         return state, OK
     return dataclasses.replace(
-        state, current=seq, mission_done=False, target_m=None, reached_s=None
+        state, current=index, mission_done=False, target_m=None, reached_s=None
     ), OK
+
+
+def not_ready(time_s: float, height_m: float, resting_height_m: float) -> str | None:
+    """Why the pre-arm checks fail, or None when they pass."""
+    if time_s < 0.2:
+        return "sensors not ready"
+    if height_m > resting_height_m + 0.02:
+        return "not on the ground"
+    return None
 
 
 def change_speed(state: CommanderState, speed_m_s: float) -> tuple[CommanderState, Verdict]:

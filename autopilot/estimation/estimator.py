@@ -21,11 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from autopilot.estimation.attitude import quat_mul, rotation, rotation_vector_floats, skew
+from autopilot.estimation.attitude import rotation, rotation_vector_floats, skew
 from simbridge.frames import Vec3, quat_multiply, quat_normalize
 from simbridge.vehicle import GRAVITY_M_S2
 
-GRAVITY_WORLD = np.array([0.0, 0.0, -GRAVITY_M_S2])
 N_ERRORS = 15
 P_, V_, TH_, BA_, BG_ = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
 
@@ -325,23 +324,6 @@ def fuse_velocity(est: Estimate, measured_m_s: np.ndarray, sd_m_s: float, gate_s
     """A world-frame velocity (GPS)."""
     innovation = measured_m_s - est.velocity_m_s
     return correct_states(est, innovation, [3, 4, 5], np.full(3, sd_m_s**2), gate_sd)
-
-
-def fuse_attitude(
-    est: Estimate,
-    measured: np.ndarray,
-    predicted: np.ndarray,
-    sd_rad: float,
-    gate_sd: float,
-) -> Fused:
-    """A full attitude (motion capture); `predicted` is the filter's at capture time. The
-    innovation is the small body-frame rotation from the prediction to the measurement."""
-    conj = predicted * np.array([1.0, -1.0, -1.0, -1.0])
-    d = quat_mul(conj, measured)
-    if d[0] < 0.0:
-        d = -d
-    innovation = 2.0 * d[1:]
-    return correct_states(est, innovation, [6, 7, 8], np.full(3, sd_rad**2), gate_sd)
 
 
 def fuse_pose(

@@ -16,18 +16,17 @@ from autopilot.commander import guided, requests
 from autopilot.commander.commander import AIRBORNE_PHASES, CommanderState, Phase
 from autopilot.commander.failsafes import Failsafes, check_failsafes
 from autopilot.commander.mission_items import Geofence, Home, MissionItem, is_home_row, plan_steps
-from autopilot.commander.modes import FlightMode, decode_mode
 from autopilot.gcs import telemetry
 from autopilot.gcs.link import GcsLink
 from autopilot.gcs.mission_protocol import MissionProtocol, Outcome
 from autopilot.gcs.param_protocol import ftp_nak, handle_param
+from autopilot.identity import Identity
 from autopilot.params import ParamStore
-from autopilot.types import FlightState
-from simbridge.frames import euler_from_quat, local_to_geodetic
+from autopilot.types import FlightMode, FlightState
+from simbridge.frames import Vec3, euler_from_quat, local_to_geodetic
 from simbridge.hil import mavlink as mav
 
-ACCEPTED, DENIED = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_DENIED
-UNSUPPORTED, FAILED = mav.MAV_RESULT_UNSUPPORTED, mav.MAV_RESULT_FAILED
+DENIED, UNSUPPORTED = mav.MAV_RESULT_DENIED, mav.MAV_RESULT_UNSUPPORTED
 FORCE_MAGIC = 21196  # ARM_DISARM param2: arm or disarm whatever the checks say
 SIGNING_SAVE_S = 10.0  # wall seconds between saves of the signing timestamp
 REFUSAL_REPEAT_S = 5.0  # wall seconds before the same refused setpoint is explained again
@@ -45,11 +44,16 @@ class StepInput:
     position_lost: str | None = None  # the estimator's word: which position source went quiet
 
 
+# a command's handler: the new state and the verdict to ack with (None: it answered itself)
+Handled = tuple[CommanderState, "requests.Verdict | None"]
+CommandHandler = Callable[["GroundStation", Any, CommanderState, StepInput], Handled]
+
+
 @dataclass
 class GroundStation:
     link: GcsLink
     params: ParamStore
-    identity: str
+    identity: Identity
     origin: tuple[float, float, float]
     on_event: Callable[[float, str], None] = lambda t, text: None
     items: tuple[MissionItem, ...] = ()
@@ -62,6 +66,8 @@ class GroundStation:
     last_status: tuple[Any, ...] | None = None
     text_id: int = 0
     refusals: dict[str, float] = field(default_factory=dict)  # setpoint refusal -> wall time
+    # MAV_CMD -> its handler: `COMMANDS`, which one station's table may add to
+    commands: dict[int, CommandHandler] = field(default_factory=lambda: dict(COMMANDS))
 
     def __post_init__(self) -> None:
         self.protocol = MissionProtocol(self.identity)
@@ -71,9 +77,8 @@ class GroundStation:
     def before_step(self, cmd: CommanderState, inp: StepInput) -> CommanderState:
         """Apply what the ground stations asked since the last step; check the failsafes."""
         self._first_position(inp)
-        hold_mode = FlightMode.GUIDED if self.identity == "ardupilot" else FlightMode.HOLD
-        if cmd.hold_mode != hold_mode:  # ArduCopter holds in Guided after a guided take-off
-            cmd = requests.dataclasses.replace(cmd, hold_mode=hold_mode)
+        if cmd.hold_mode != self.identity.hold_mode:
+            cmd = requests.dataclasses.replace(cmd, hold_mode=self.identity.hold_mode)
         if cmd.phase not in AIRBORNE_PHASES:
             self.surface_z = inp.state.position_m[2] - inp.height_m
         for m in self.link.poll(inp.wall_s):
@@ -105,7 +110,7 @@ class GroundStation:
             due = [*due, "HEARTBEAT", "EXTENDED_SYS_STATE"]
         for name in dict.fromkeys(due):
             self._send_named(name, snap, cmd, inp)
-        current = self._mission_current_key(cmd)
+        current = telemetry.mission_current(cmd, len(self.items))
         if current != self.last_mission_current:
             self._send_named("MISSION_CURRENT", snap, cmd, inp)
         if (
@@ -118,6 +123,10 @@ class GroundStation:
         """Home until one is set: where the vehicle was at the first step."""
         if self.initial_home_m is None:
             self.initial_home_m = inp.state.position_m
+
+    def _home_m(self, cmd: CommanderState) -> Vec3:
+        """Where it armed, else where it was at the first step, else the home given (origin)."""
+        return cmd.home_m or self.initial_home_m or (0.0, 0.0, 0.0)
 
     def save_signing(self, wall_s: float) -> None:
         if self.link.signing is not None:
@@ -132,52 +141,32 @@ class GroundStation:
     def _text(self, inp: StepInput, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
         """STATUSTEXT; a text over 50 bytes goes in chunks sharing an id (MAVLink 2)."""
         self.on_event(inp.time_s, text)
-        data = text.encode()[: 50 * 20]
-        chunks = [data[i : i + 50] for i in range(0, len(data), 50)] or [b""]
-        text_id = 0
-        if len(chunks) > 1:
+        messages = telemetry.statustext(text, severity, self.text_id % 65535 + 1)
+        if len(messages) > 1:
             self.text_id = self.text_id % 65535 + 1
-            text_id = self.text_id
-        for seq, chunk in enumerate(chunks):
-            self.send(mav.MAVLink_statustext_message(severity, chunk, text_id, seq), inp)
+        for message in messages:
+            self.send(message, inp)
 
     def _snapshot(self, cmd: CommanderState, inp: StepInput) -> telemetry.Snapshot:
-        home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
         return telemetry.Snapshot(
             time_s=inp.time_s,
             state=inp.state,
             origin=self.origin,
-            home_m=home,
+            home_m=self._home_m(cmd),
             phase=cmd.phase,
             mode=cmd.mode,
             armed=cmd.phase not in (Phase.DISARMED, Phase.LANDED),
-            ready=self._not_ready(cmd, inp) is None,
+            ready=requests.not_ready(inp.time_s, inp.height_m, inp.resting_height_m) is None,
             identity=self.identity,
             fence_on=self.params.geofence() != Geofence(),
             fence_breached=self.failsafes.fence_breached,
         )
 
-    def _mission_current_key(self, cmd: CommanderState) -> tuple[int, int, int]:
-        if not self.items:
-            state = mav.MISSION_STATE_NO_MISSION
-        elif cmd.mission_done:
-            state = mav.MISSION_STATE_COMPLETE
-        elif cmd.mode == FlightMode.MISSION and cmd.phase in AIRBORNE_PHASES:
-            state = mav.MISSION_STATE_ACTIVE
-        elif cmd.mode == FlightMode.MISSION:
-            state = mav.MISSION_STATE_NOT_STARTED
-        else:
-            state = mav.MISSION_STATE_PAUSED if cmd.current > 0 else mav.MISSION_STATE_NOT_STARTED
-        seq = cmd.plan[cmd.current].seq if cmd.plan and cmd.current < len(cmd.plan) else 0
-        if cmd.mission_done:
-            seq = len(self.items)  # past the last item, as PX4 reports a finished mission
-        return seq, len(self.items), state
-
     def _send_named(
         self, name: str, snap: telemetry.Snapshot, cmd: CommanderState, inp: StepInput
     ) -> None:
         if name == "MISSION_CURRENT":
-            seq, total, state = self._mission_current_key(cmd)
+            seq, total, state = telemetry.mission_current(cmd, len(self.items))
             self.last_mission_current = (seq, total, state)
             mode = int(cmd.mode == FlightMode.MISSION)
             self.send(mav.MAVLink_mission_current_message(seq, total, state, mode), inp)
@@ -189,7 +178,7 @@ class GroundStation:
                 snap, 100.0 * c.dropped / total if total else 0.0, c.dropped
             )
         elif name == "AUTOPILOT_VERSION":
-            message = telemetry.autopilot_version(self.identity)
+            message = telemetry.autopilot_version()
         else:
             builder = {
                 "HEARTBEAT": telemetry.heartbeat,
@@ -213,199 +202,185 @@ class GroundStation:
 
     def _handle(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
         kind = m.get_type()
-        if kind == "HEARTBEAT":
-            if m.type == mav.MAV_TYPE_GCS or m.get_srcComponent() != self.link.compid:
-                self.failsafes.gcs_seen = True
-                self.failsafes.gcs_heard_wall_s = inp.wall_s
-                if self.failsafes.gcs_lost:
-                    self.failsafes.gcs_lost = False
-                    self._text(inp, "ground station link regained")
-            return cmd
-        if kind in ("COMMAND_LONG", "COMMAND_INT"):
-            return self._command(m, cmd, inp)
-        if kind == "SET_MODE":
-            mode = decode_mode(self.identity, int(m.custom_mode))
-            peer = (m.get_srcSystem(), m.get_srcComponent())
-            return self._mode(cmd, mode, inp, 11, peer, f"custom mode {int(m.custom_mode)}")
-        if kind.startswith("PARAM_"):
-            return self._param(m, cmd, inp)
         if kind in ("MISSION_ITEM", "MISSION_ITEM_INT") and m.current == GUIDED_ITEM:
             return self._guided_item(m, cmd, inp)
-        if kind.startswith("MISSION_") and kind != "MISSION_SET_CURRENT":
-            return self._mission(m, cmd, inp)
-        if kind == "MISSION_SET_CURRENT":
-            cmd, verdict = self._set_current(cmd, int(m.seq))
-            if not verdict.accepted:
-                self._text(inp, verdict.reason, mav.MAV_SEVERITY_WARNING)
-            return cmd
-        if kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"):
-            cmd, refused = guided.setpoint(m, cmd, self._context(cmd, inp))
-            if refused is not None:
-                self.link.counters.invalid += 1
-                if inp.wall_s - self.refusals.get(refused, -math.inf) > REFUSAL_REPEAT_S:
-                    if len(self.refusals) > MAX_REFUSALS:  # hostile input: bounded all the same
-                        self.refusals.clear()
-                    self.refusals[refused] = inp.wall_s  # a stream's refusal, said once
-                    self._text(inp, refused, mav.MAV_SEVERITY_WARNING)
-            return cmd
-        if kind == "REQUEST_DATA_STREAM":
-            ids = telemetry.DATA_STREAMS.keys() if m.req_stream_id == 0 else [m.req_stream_id]
-            for stream_id in ids:
-                for name in telemetry.DATA_STREAMS.get(stream_id, ()):
-                    self.streams.set_rate(name, float(m.req_message_rate) if m.start_stop else 0.0)
-            return cmd
-        if kind == "FILE_TRANSFER_PROTOCOL":
-            self.send(ftp_nak(m), inp)
-            return cmd
+        handler = MESSAGES.get(kind)
+        if handler is None and kind.startswith("PARAM_"):
+            handler = GroundStation._param
+        elif handler is None and kind.startswith("MISSION_"):
+            handler = GroundStation._mission
+        return cmd if handler is None else handler(self, m, cmd, inp)
+
+    def _heartbeat(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        if m.type == mav.MAV_TYPE_GCS or m.get_srcComponent() != self.link.compid:
+            self.failsafes.gcs_seen = True
+            self.failsafes.gcs_heard_wall_s = inp.wall_s
+            if self.failsafes.gcs_lost:
+                self.failsafes.gcs_lost = False
+                self._text(inp, "ground station link regained")
         return cmd
 
-    def _ack(self, m: Any, command: int, result: int, inp: StepInput, reason: str = "") -> None:
-        if reason:
-            self._text(inp, reason, mav.MAV_SEVERITY_WARNING)
+    def _set_mode_message(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        mode = self.identity.decode_mode(int(m.custom_mode), None)
+        cmd, verdict = self._mode(cmd, mode, inp, f"custom mode {int(m.custom_mode)}")
+        self._ack(m, mav.MAVLINK_MSG_ID_SET_MODE, verdict, inp)
+        return cmd
+
+    def _mission_set_current(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        cmd, verdict = requests.set_current(cmd, int(m.seq))
+        if not verdict.accepted:
+            self._text(inp, verdict.reason, mav.MAV_SEVERITY_WARNING)
+        return cmd
+
+    def _setpoint(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        cmd, refused = guided.setpoint(m, cmd, self._context(cmd, inp))
+        if refused is not None:
+            self.link.counters.invalid += 1
+            if inp.wall_s - self.refusals.get(refused, -math.inf) > REFUSAL_REPEAT_S:
+                if len(self.refusals) > MAX_REFUSALS:  # hostile input: bounded all the same
+                    self.refusals.clear()
+                self.refusals[refused] = inp.wall_s  # a stream's refusal, said once
+                self._text(inp, refused, mav.MAV_SEVERITY_WARNING)
+        return cmd
+
+    def _request_data_stream(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        ids = telemetry.DATA_STREAMS.keys() if m.req_stream_id == 0 else [m.req_stream_id]
+        for stream_id in ids:
+            for name in telemetry.DATA_STREAMS.get(stream_id, ()):
+                self.streams.set_rate(name, float(m.req_message_rate) if m.start_stop else 0.0)
+        return cmd
+
+    def _ftp(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
+        self.send(ftp_nak(m), inp)
+        return cmd
+
+    def _ack(self, m: Any, command: int, verdict: requests.Verdict, inp: StepInput) -> None:
+        """COMMAND_ACK to the sender; the reason of a refusal first, as STATUSTEXT."""
+        if verdict.reason:
+            self._text(inp, verdict.reason, mav.MAV_SEVERITY_WARNING)
         self.send(
             mav.MAVLink_command_ack_message(
-                command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent()
+                command, verdict.result, 0, 0, m.get_srcSystem(), m.get_srcComponent()
             ),
             inp,
         )
 
-    def _not_ready(self, cmd: CommanderState, inp: StepInput) -> str | None:
-        if inp.time_s < 0.2:
-            return "sensors not ready"
-        if inp.height_m > inp.resting_height_m + 0.02:
-            return "not on the ground"
-        return None
+    # --- commands: one handler per MAV_CMD, in `COMMANDS` ----------------------------------
 
     def _command(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
-        c = int(m.command)
-        p = [m.param1, m.param2, m.param3, m.param4]
-        position = inp.state.position_m
-        t = inp.time_s
-        params = self.params.commander()
-        verdict = requests.OK
-        if c == mav.MAV_CMD_COMPONENT_ARM_DISARM:
-            force = round(p[1]) == FORCE_MAGIC if math.isfinite(p[1]) else False
-            if p[0] == 1.0:
-                cmd, verdict = requests.arm(cmd, t, position, self._not_ready(cmd, inp), force)
-                if verdict.accepted:
-                    self.on_event(t, "armed by the ground station")
-            elif p[0] == 0.0:
-                cmd, verdict = requests.disarm(cmd, t, force)
-                if verdict.accepted:
-                    self.on_event(t, "disarmed by the ground station")
-            else:
-                verdict = requests.Verdict(DENIED, f"ARM_DISARM param1 {p[0]:g}: expected 0 or 1")
-        elif c == mav.MAV_CMD_NAV_TAKEOFF:
-            if requests.airborne(cmd):  # as ArduCopter: never left climbing in a take-off mode
-                verdict = requests.Verdict(DENIED, "take-off denied: already flying")
-            elif cmd.phase != Phase.ARMED:
-                verdict = requests.Verdict(DENIED, "take-off denied: arm first")
-            else:
-                altitude = None
-                z = m.param7 if m.get_type() == "COMMAND_LONG" else m.z
-                if self.identity == "ardupilot" and math.isfinite(z) and z > 0.0:
-                    altitude = float(z)
-                if self.identity == "ardupilot" and altitude is None:
-                    # ArduCopter takes off to the command's altitude, above where it stands
-                    verdict = requests.Verdict(DENIED, "take-off denied: param 7 altitude <= 0")
-                else:
-                    cmd = requests.dataclasses.replace(cmd, takeoff_altitude_m=altitude)
-                    cmd, verdict = requests.set_mode(cmd, FlightMode.TAKEOFF, t, position, params)
-        elif c == mav.MAV_CMD_NAV_LAND:
-            cmd, verdict = requests.set_mode(cmd, FlightMode.LAND, t, position, params)
-        elif c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            cmd, verdict = requests.set_mode(cmd, FlightMode.RETURN, t, position, params)
-        elif c == mav.MAV_CMD_DO_SET_MODE:
-            if not int(p[0]) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-                verdict = requests.Verdict(DENIED, "set mode: only custom modes (param1 bit 0)")
-            else:
-                sub = int(p[2]) if self.identity == "px4" and math.isfinite(p[2]) else 0
-                mode = decode_mode(self.identity, int(p[1]), sub)
-                asked = f"main mode {int(p[1])} sub {sub}" if self.identity == "px4" else ""
-                peer = (m.get_srcSystem(), m.get_srcComponent())
-                return self._mode(cmd, mode, inp, c, peer, asked or f"custom mode {int(p[1])}")
-        elif c == mav.MAV_CMD_MISSION_START:
-            if math.isfinite(p[0]) and p[0] > 0 and cmd.plan:
-                cmd, verdict = self._set_current(cmd, int(p[0]))
-            if verdict.accepted:
-                if cmd.mode == FlightMode.MISSION and cmd.mission_done:
-                    cmd = requests.dataclasses.replace(cmd, mode=FlightMode.HOLD)
-                cmd, verdict = requests.set_mode(cmd, FlightMode.MISSION, t, position, params)
-        elif c == mav.MAV_CMD_DO_REPOSITION:
-            cmd, verdict = guided.reposition(m, cmd, self._context(cmd, inp))
-        elif c == mav.MAV_CMD_DO_CHANGE_SPEED:
-            cmd, verdict = requests.change_speed(cmd, float(p[1]))
-        elif c == mav.MAV_CMD_DO_SET_MISSION_CURRENT:
-            cmd, verdict = self._set_current(cmd, int(p[0]))
-        elif c == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
-            name = mav.mavlink_map[int(p[0])].msgname if int(p[0]) in mav.mavlink_map else None
-            if name is None or (
-                name not in telemetry.DEFAULT_RATES_HZ and name not in telemetry.ONE_SHOT.values()
-            ):
-                verdict = requests.Verdict(UNSUPPORTED)
-            else:
-                interval_us = p[1]
-                hz = None if interval_us == 0 else (0.0 if interval_us < 0 else 1e6 / interval_us)
-                self.streams.set_rate(name, hz)
-        elif c in (
-            mav.MAV_CMD_REQUEST_MESSAGE,
-            mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
-            mav.MAV_CMD_GET_HOME_POSITION,
-        ):
-            wanted = {
-                mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
-                mav.MAV_CMD_GET_HOME_POSITION: mav.MAVLINK_MSG_ID_HOME_POSITION,
-            }.get(c, int(p[0]) if math.isfinite(p[0]) else -1)
-            name = telemetry.ONE_SHOT.get(wanted)
-            if name is None:
-                verdict = requests.Verdict(UNSUPPORTED)
-            else:
-                self._ack(m, c, ACCEPTED, inp)
-                self._send_named(name, self._snapshot(cmd, inp), cmd, inp)
-                return cmd
+        """COMMAND_LONG / COMMAND_INT: the handler `commands` has for it, acked with its verdict
+        (a handler that answers itself returns None); a command without one is unsupported."""
+        command = int(m.command)
+        handler = self.commands.get(command)
+        if handler is None:
+            verdict: requests.Verdict | None = requests.Verdict(UNSUPPORTED)
         else:
-            verdict = requests.Verdict(UNSUPPORTED)
-        self._ack(m, c, verdict.result, inp, verdict.reason)
+            cmd, verdict = handler(self, m, cmd, inp)
+        if verdict is not None:
+            self._ack(m, command, verdict, inp)
         return cmd
+
+    def _set_mode(
+        self, cmd: CommanderState, mode: FlightMode, inp: StepInput
+    ) -> tuple[CommanderState, requests.Verdict]:
+        params = self.params.commander()
+        return requests.set_mode(cmd, mode, inp.time_s, inp.state.position_m, params)
+
+    def _arm_disarm(self, m: Any, cmd: CommanderState, inp: StepInput) -> Handled:
+        force = round(m.param2) == FORCE_MAGIC if math.isfinite(m.param2) else False
+        t = inp.time_s
+        if m.param1 == 1.0:
+            ready = requests.not_ready(inp.time_s, inp.height_m, inp.resting_height_m)
+            cmd, verdict = requests.arm(cmd, t, inp.state.position_m, ready, force)
+            if verdict.accepted:
+                self.on_event(t, "armed by the ground station")
+        elif m.param1 == 0.0:
+            cmd, verdict = requests.disarm(cmd, t, force)
+            if verdict.accepted:
+                self.on_event(t, "disarmed by the ground station")
+        else:
+            verdict = requests.Verdict(DENIED, f"ARM_DISARM param1 {m.param1:g}: expected 0 or 1")
+        return cmd, verdict
+
+    def _takeoff(self, m: Any, cmd: CommanderState, inp: StepInput) -> Handled:
+        if requests.airborne(cmd):  # as ArduCopter: never left climbing in a take-off mode
+            return cmd, requests.Verdict(DENIED, "take-off denied: already flying")
+        if cmd.phase != Phase.ARMED:
+            return cmd, requests.Verdict(DENIED, "take-off denied: arm first")
+        altitude = None
+        if self.identity.takeoff_to_command_altitude:
+            # ArduCopter takes off to the command's altitude, above where it stands
+            z = m.param7 if m.get_type() == "COMMAND_LONG" else m.z
+            if not (math.isfinite(z) and z > 0.0):
+                return cmd, requests.Verdict(DENIED, "take-off denied: param 7 altitude <= 0")
+            altitude = float(z)
+        cmd = requests.dataclasses.replace(cmd, takeoff_altitude_m=altitude)
+        return self._set_mode(cmd, FlightMode.TAKEOFF, inp)
+
+    def _do_set_mode(self, m: Any, cmd: CommanderState, inp: StepInput) -> Handled:
+        if not int(m.param1) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return cmd, requests.Verdict(DENIED, "set mode: only custom modes (param1 bit 0)")
+        mode, asked = self.identity.mode_from_command(m.param2, m.param3)
+        return self._mode(cmd, mode, inp, asked)
+
+    def _mission_start(self, m: Any, cmd: CommanderState, inp: StepInput) -> Handled:
+        verdict = requests.OK
+        if math.isfinite(m.param1) and m.param1 > 0 and cmd.plan:
+            cmd, verdict = requests.set_current(cmd, int(m.param1))
+        if not verdict.accepted:
+            return cmd, verdict
+        if cmd.mode == FlightMode.MISSION and cmd.mission_done:
+            cmd = requests.dataclasses.replace(cmd, mode=FlightMode.HOLD)
+        return self._set_mode(cmd, FlightMode.MISSION, inp)
+
+    def _reposition(self, m: Any, cmd: CommanderState, inp: StepInput) -> Handled:
+        return guided.reposition(m, cmd, self._context(cmd, inp))
+
+    def _change_speed(self, m: Any, cmd: CommanderState, inp: StepInput) -> Handled:
+        return requests.change_speed(cmd, float(m.param2))
+
+    def _set_mission_current(self, m: Any, cmd: CommanderState, inp: StepInput) -> Handled:
+        return requests.set_current(cmd, int(m.param1))
+
+    def _set_message_interval(self, m: Any, cmd: CommanderState, inp: StepInput) -> Handled:
+        msg_id = int(m.param1)
+        name = mav.mavlink_map[msg_id].msgname if msg_id in mav.mavlink_map else None
+        if name not in telemetry.DEFAULT_RATES_HZ and name not in telemetry.ONE_SHOT.values():
+            return cmd, requests.Verdict(UNSUPPORTED)
+        interval_us = m.param2
+        hz = None if interval_us == 0 else (0.0 if interval_us < 0 else 1e6 / interval_us)
+        self.streams.set_rate(name, hz)
+        return cmd, requests.OK
+
+    def _request_message(self, m: Any, cmd: CommanderState, inp: StepInput) -> Handled:
+        """REQUEST_MESSAGE and the older commands that ask for one message: acked, then sent."""
+        command = int(m.command)
+        wanted = REQUESTED_MESSAGE.get(command, int(m.param1) if math.isfinite(m.param1) else -1)
+        name = telemetry.ONE_SHOT.get(wanted)
+        if name is None:
+            return cmd, requests.Verdict(UNSUPPORTED)
+        self._ack(m, command, requests.OK, inp)
+        self._send_named(name, self._snapshot(cmd, inp), cmd, inp)
+        return cmd, None
 
     def _mode(
-        self,
-        cmd: CommanderState,
-        mode: FlightMode | None,
-        inp: StepInput,
-        command: int,
-        peer: tuple[int, int],
-        asked: str,
-    ) -> CommanderState:
-        if mode is None:
-            verdict = requests.Verdict(DENIED, f"set mode: this vehicle has no {asked}")
-        else:
-            params = self.params.commander()
-            position = inp.state.position_m
-            before = cmd.mode
-            cmd, verdict = requests.set_mode(cmd, mode, inp.time_s, position, params)
-            if verdict.accepted and cmd.mode != before:
-                self.on_event(inp.time_s, f"mode {cmd.mode}")
-        if verdict.reason:
-            self._text(inp, verdict.reason, mav.MAV_SEVERITY_WARNING)
-        self.send(mav.MAVLink_command_ack_message(command, verdict.result, 0, 0, *peer), inp)
-        return cmd
-
-    def _set_current(
-        self, cmd: CommanderState, seq: int
+        self, cmd: CommanderState, mode: FlightMode | None, inp: StepInput, asked: str
     ) -> tuple[CommanderState, requests.Verdict]:
-        for index, step in enumerate(cmd.plan):
-            if step.seq == seq:
-                return requests.set_current(cmd, index)
-        return cmd, requests.Verdict(DENIED, f"no mission item {seq}")
+        """SET_MODE or DO_SET_MODE asking for `mode` (None: one this identity does not have)."""
+        if mode is None:
+            return cmd, requests.Verdict(DENIED, f"set mode: this vehicle has no {asked}")
+        before = cmd.mode
+        cmd, verdict = self._set_mode(cmd, mode, inp)
+        if verdict.accepted and cmd.mode != before:
+            self.on_event(inp.time_s, f"mode {cmd.mode}")
+        return cmd, verdict
 
     def _context(self, cmd: CommanderState, inp: StepInput) -> guided.Context:
-        home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
         return guided.Context(
             identity=self.identity,
             origin=self.origin,
-            home_m=home,
-            home_up_m=self.ground_z(home),
+            home_m=self._home_m(cmd),
+            home_up_m=self.ground_z(),
             position_m=inp.state.position_m,
             heading_rad=euler_from_quat(inp.state.quaternion)[2],
             fence=self.params.geofence(),
@@ -439,12 +414,13 @@ class GroundStation:
     # --- missions --------------------------------------------------------------------------
 
     def home(self, cmd: CommanderState) -> Home:
-        home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
+        home = self._home_m(cmd)
         lat, lon = local_to_geodetic(self.origin[0], self.origin[1], home[0], home[1])
-        return Home(lat, lon, self.origin[2] + self.ground_z(home))
+        return Home(lat, lon, self.origin[2] + self.ground_z())
 
-    def ground_z(self, home_m: tuple[float, float, float]) -> float:
-        """The surface under home, which relative altitudes count from (a box top, say)."""
+    def ground_z(self) -> float:
+        """The surface the vehicle last stood on, home's once it armed there (a box top, say),
+        which relative altitudes count from; 0 before the first step."""
         return self.surface_z if self.surface_z is not None else 0.0
 
     def _mission(self, m: Any, cmd: CommanderState, inp: StepInput) -> CommanderState:
@@ -464,22 +440,60 @@ class GroundStation:
         return requests.load_plan(cmd, self._plan(cmd, items))
 
     def _plan(self, cmd: CommanderState, items: tuple[MissionItem, ...]) -> tuple:
-        home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
-        origin = Home(*self.origin)
-        steps = plan_steps(items, origin, self.ground_z(home))
-        if self.identity == "ardupilot" and steps and is_home_row(items[0], self.home(cmd)):
-            steps = steps[1:]  # ArduPilot's item 0 is home, not a place to fly to
+        steps = plan_steps(items, Home(*self.origin), self.ground_z())
+        if self.identity.home_is_item_0 and steps and is_home_row(items[0], self.home(cmd)):
+            steps = steps[1:]
         return steps
 
     # --- failsafes -------------------------------------------------------------------------
 
     def _failsafes(self, cmd: CommanderState, inp: StepInput) -> CommanderState:
-        home = cmd.home_m if cmd.home_m is not None else self.initial_home_m
         cmd, texts = check_failsafes(
             self.failsafes, cmd, self.params.failsafe(), self.params.geofence(),
-            self.params.commander(), inp.time_s, inp.wall_s, inp.state.position_m, home,
+            self.params.commander(), inp.time_s, inp.wall_s, inp.state.position_m,
+            self._home_m(cmd),
             inp.position_lost,
         )  # fmt: skip
         for text in texts:
             self._text(inp, text, mav.MAV_SEVERITY_CRITICAL)
         return cmd
+
+
+# What a message or a command does: a handler a table names, as telemetry names its builders.
+def _switch_to(mode: FlightMode) -> CommandHandler:
+    """The handler of a command that only switches to `mode`."""
+    return lambda station, m, cmd, inp: station._set_mode(cmd, mode, inp)
+
+
+MessageHandler = Callable[[GroundStation, Any, CommanderState, StepInput], CommanderState]
+MESSAGES: dict[str, MessageHandler] = {
+    "HEARTBEAT": GroundStation._heartbeat,
+    "COMMAND_LONG": GroundStation._command,
+    "COMMAND_INT": GroundStation._command,
+    "SET_MODE": GroundStation._set_mode_message,
+    "MISSION_SET_CURRENT": GroundStation._mission_set_current,
+    "SET_POSITION_TARGET_LOCAL_NED": GroundStation._setpoint,
+    "SET_POSITION_TARGET_GLOBAL_INT": GroundStation._setpoint,
+    "REQUEST_DATA_STREAM": GroundStation._request_data_stream,
+    "FILE_TRANSFER_PROTOCOL": GroundStation._ftp,
+}
+COMMANDS: dict[int, CommandHandler] = {
+    mav.MAV_CMD_COMPONENT_ARM_DISARM: GroundStation._arm_disarm,
+    mav.MAV_CMD_NAV_TAKEOFF: GroundStation._takeoff,
+    mav.MAV_CMD_NAV_LAND: _switch_to(FlightMode.LAND),
+    mav.MAV_CMD_NAV_RETURN_TO_LAUNCH: _switch_to(FlightMode.RETURN),
+    mav.MAV_CMD_DO_SET_MODE: GroundStation._do_set_mode,
+    mav.MAV_CMD_MISSION_START: GroundStation._mission_start,
+    mav.MAV_CMD_DO_REPOSITION: GroundStation._reposition,
+    mav.MAV_CMD_DO_CHANGE_SPEED: GroundStation._change_speed,
+    mav.MAV_CMD_DO_SET_MISSION_CURRENT: GroundStation._set_mission_current,
+    mav.MAV_CMD_SET_MESSAGE_INTERVAL: GroundStation._set_message_interval,
+    mav.MAV_CMD_REQUEST_MESSAGE: GroundStation._request_message,
+    mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: GroundStation._request_message,
+    mav.MAV_CMD_GET_HOME_POSITION: GroundStation._request_message,
+}
+# the older commands that each ask for one message (REQUEST_MESSAGE names it in param1)
+REQUESTED_MESSAGE = {
+    mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+    mav.MAV_CMD_GET_HOME_POSITION: mav.MAVLINK_MSG_ID_HOME_POSITION,
+}

@@ -23,6 +23,7 @@ from autopilot.commander.mission_items import (
     MissionItem,
     validate_item,
 )
+from autopilot.identity import Identity
 from simbridge.hil import mavlink as mav
 
 RETRY_S = 0.5
@@ -79,7 +80,7 @@ def item_message(item: MissionItem, seq: int, current: bool, target: tuple[int, 
 
 
 class MissionProtocol:
-    def __init__(self, identity: str) -> None:
+    def __init__(self, identity: Identity) -> None:
         self.identity = identity
         self.items: tuple[MissionItem, ...] = ()
         self.upload: Upload | None = None
@@ -120,7 +121,7 @@ class MissionProtocol:
                 (mav.MAVLink_mission_count_message(peer[0], peer[1], count, mission_type),)
             )
         if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
-            if kind == "MISSION_REQUEST" and self.identity == "px4":
+            if kind == "MISSION_REQUEST" and not self.identity.legacy_mission_request:
                 return Outcome((self.ack(peer, mav.MAV_MISSION_UNSUPPORTED),))
             if mission_type != MISSION or not 0 <= m.seq < len(self.items):
                 return Outcome(

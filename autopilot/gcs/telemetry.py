@@ -12,9 +12,9 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from autopilot.commander.commander import AIRBORNE_PHASES, Phase
-from autopilot.commander.modes import IDENTITIES, FlightMode, custom_mode
-from autopilot.types import FlightState
+from autopilot.commander.commander import AIRBORNE_PHASES, CommanderState, Phase
+from autopilot.identity import Identity
+from autopilot.types import FlightMode, FlightState
 from simbridge.frames import (
     enu_to_ned,
     euler_from_quat,
@@ -53,7 +53,7 @@ class Snapshot:
     mode: FlightMode
     armed: bool
     ready: bool  # pre-arm checks pass
-    identity: str
+    identity: Identity
     fence_on: bool = False  # a geofence limit is set
     fence_breached: bool = False
 
@@ -73,9 +73,9 @@ def heartbeat(s: Snapshot) -> Any:
     status = mav.MAV_STATE_ACTIVE if s.armed else mav.MAV_STATE_STANDBY
     return mav.MAVLink_heartbeat_message(
         mav.MAV_TYPE_QUADROTOR,
-        IDENTITIES[s.identity],
+        s.identity.autopilot,
         base,
-        custom_mode(s.mode, s.identity),
+        s.identity.custom_mode(s.mode),
         status,
         3,
     )
@@ -146,7 +146,37 @@ def home_position(s: Snapshot) -> Any | None:
     )  # fmt: skip
 
 
-def autopilot_version(identity: str) -> Any:
+def statustext(text: str, severity: int, text_id: int) -> list[Any]:
+    """STATUSTEXT: a text over 50 bytes goes in chunks sharing `text_id` (MAVLink 2), one
+    alone with id 0."""
+    data = text.encode()[: 50 * 20]
+    chunks = [data[i : i + 50] for i in range(0, len(data), 50)] or [b""]
+    shared = text_id if len(chunks) > 1 else 0
+    return [
+        mav.MAVLink_statustext_message(severity, chunk, shared, seq)
+        for seq, chunk in enumerate(chunks)
+    ]
+
+
+def mission_current(cmd: CommanderState, item_count: int) -> tuple[int, int, int]:
+    """MISSION_CURRENT's seq, total and mission_state."""
+    if not item_count:
+        state = mav.MISSION_STATE_NO_MISSION
+    elif cmd.mission_done:
+        state = mav.MISSION_STATE_COMPLETE
+    elif cmd.mode == FlightMode.MISSION and cmd.phase in AIRBORNE_PHASES:
+        state = mav.MISSION_STATE_ACTIVE
+    elif cmd.mode == FlightMode.MISSION:
+        state = mav.MISSION_STATE_NOT_STARTED
+    else:
+        state = mav.MISSION_STATE_PAUSED if cmd.current > 0 else mav.MISSION_STATE_NOT_STARTED
+    seq = cmd.plan[cmd.current].seq if cmd.plan and cmd.current < len(cmd.plan) else 0
+    if cmd.mission_done:
+        seq = item_count  # past the last item, as PX4 reports a finished mission
+    return seq, item_count, state
+
+
+def autopilot_version() -> Any:
     return mav.MAVLink_autopilot_version_message(
         CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 1, [0] * 18
     )

@@ -1,14 +1,14 @@
 """The flight loop's side of online learning: parameters in, samples to the learner, the
 current snapshot into the neural model.
 
-The GFX_OL_* parameters (autopilot/params.py) choose the method and its hyperparameters and
-may change in flight; GFX_OL_PAUSE pauses, GFX_OL_RESET = 1 resets to the offline weights
-(and reads 0 again). Learning needs the neural model: with another one it stays idle.
+The GFX_OL_* parameters choose the method (autopilot/params.py) and its hyperparameters
+(learner/online/settings.py) and may change in flight; GFX_OL_PAUSE pauses, GFX_OL_RESET = 1
+resets to the offline weights (and reads 0 again). Learning needs the neural model: with
+another one it stays idle.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,14 +17,14 @@ from typing import Any
 import numpy as np
 
 from autopilot.control.ground_models import GroundEffectModel, default_network
-from autopilot.params import ONLINE_METHODS, ParamStore
+from autopilot.params import ParamStore
 from learner.dataset import COLUMNS, FEATURES, TARGETS
 from learner.online.memory import Memory, load_memory, memory_path_for, offline_path_for
 from learner.online.names import NEEDS_BASIS, NEEDS_MEMORY
 from simbridge.config import ConfigError
 
-# torch, and the learner with it, load only when learning is on: a flight without it
-# connects to the simulator as soon as before
+# torch, and the learner with it, load only when learning is on: a flight without learning
+# connects to the simulator without waiting for them
 SAMPLE_HZ = 100.0  # thesis: samples at 100 Hz, an update per 64 (about 1.6 per second)
 Report = Callable[[float, float | None, int], None]  # (sim time, loss, version)
 
@@ -38,29 +38,6 @@ class OnlineOptions:
     deterministic: bool = True  # updates inside the control step: same sim times every run
     save_path: Path | None = None  # the adapted model at the end of the flight
     on_report: Report | None = None  # (sim time, loss, version) per update: the recorder
-    base: Any = None  # OnlineSettings the parameters do not cover (None: the defaults)
-
-
-def settings_from(params: ParamStore, base: Any = None) -> Any:
-    """The online settings (OnlineSettings) the parameters ask for; None when learning is off."""
-    p = params.online()
-    method = ONLINE_METHODS[p.method]
-    if method == "off":
-        return None
-    from learner.online.settings import OnlineSettings
-
-    return dataclasses.replace(
-        base if base is not None else OnlineSettings(),
-        method=method,
-        learning_rate=p.learning_rate,
-        penalty=p.penalty,
-        margin=p.margin,
-        forgetting=p.forgetting,
-        rls_initial_covariance=p.rls_covariance,
-        rls_scale_sd=p.rls_scale_sd,
-        composite_tracking_n_s_m=p.tracking,
-        composite_confidence=p.confidence,
-    )
 
 
 def find_memory(network: str | Path | None, rho: float) -> Memory | None:
@@ -113,7 +90,7 @@ class OnlineControl:
         self.learner: Any = None  # autopilot.online.online_learner.OnlineLearner, once learning
         self.active = False
         self.errors: list[str] = []
-        settings = settings_from(params, options.base)
+        settings = params.online_settings()
         needs_memory = settings is not None and settings.method in NEEDS_MEMORY
         # refuse at the start, not in flight: the memory must exist
         if needs_memory and find_memory(network, params.model()[1]) is None:
@@ -140,7 +117,7 @@ class OnlineControl:
 
     def refresh(self, model: GroundEffectModel, t_s: float) -> None:
         """After a parameter change: start, reconfigure, pause or reset the learner."""
-        settings = settings_from(self.params, self.options.base)
+        settings = self.params.online_settings()
         self.active = settings is not None and model.name == "neural"
         if settings is None or not self.active:
             return

@@ -1,48 +1,117 @@
-"""Any flight log into a `FlightLog`: one reader per format, chosen by the file's suffix
-(`READERS`), else by its first bytes (`SNIFFERS`: a Crazyflie's microSD card names its logs
-`log00`, `cf50_01`, without a suffix). A new format is one entry in either table."""
+"""Any flight log into a `FlightLog` through one entry point, `read_log`.
+
+Each format is one `LogFormat` declaration passed to `register`: its name, its reader, the
+suffixes it is known by and, for files whose suffix says nothing (a Crazyflie's microSD card
+names its logs `log00`, `cf50_01`), a test on the file's first bytes. `read_log`, its error
+messages and the command line's help read the registered formats; nothing else lists them.
+"""
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-from learner.flightlogs.flightlog import FlightLog
-from learner.flightlogs.tables import ColumnMapping, read_table_log
 from simbridge.config import ConfigError
-from simbridge.vehicle import Vehicle
+
+if TYPE_CHECKING:
+    from learner.flightlogs.flightlog import FlightLog
+    from learner.flightlogs.tables import ColumnMapping
+    from simbridge.vehicle import Vehicle
 
 # (path, mapping or None, vehicle or its name or None) -> FlightLog
-Reader = Callable[[Path, ColumnMapping | None, Vehicle | str | None], FlightLog]
+Reader = Callable[[Path, "ColumnMapping | None", "Vehicle | str | None"], "FlightLog"]
+Sniff = Callable[[bytes], bool]  # the first SNIFF_BYTES of a file -> whether it is the format
+SNIFF_BYTES = 4096
 
 
-def _recording(path: Path, mapping: ColumnMapping | None, vehicle: Vehicle | str | None):
-    # imported here: the recording reader loads rerun, which other logs do not need
-    from learner.flightlogs.recording_log import read_recording_log
+@dataclass(frozen=True)
+class LogFormat:
+    """One flight-log format: what it is called, how to read it and how to recognise it."""
 
-    return read_recording_log(path)
-
-
-def _cfusd(path: Path, mapping: ColumnMapping | None, vehicle: Vehicle | str | None):
-    from learner.flightlogs.cfusd import read_cfusd_log
-
-    return read_cfusd_log(path, mapping, vehicle)
+    name: str  # in messages and --help, e.g. "PX4 ULog"
+    read: Reader
+    suffixes: tuple[str, ...] = ()  # lower case with the dot: a file with one is this format
+    sniff: Sniff | None = None  # for a file no suffix claims
 
 
-def _autopilot(module: str, function: str) -> Reader:
-    # imported when used: pyulog and pymavlink's log readers load only for their logs
-    def read(path: Path, mapping: ColumnMapping | None, vehicle: Vehicle | str | None):
-        import importlib
-
-        return getattr(importlib.import_module(module), function)(path, mapping, vehicle)
-
-    return read
+FORMATS: list[LogFormat] = []
 
 
-def _is_cfusd(head: bytes) -> bool:
-    from learner.flightlogs.cfusd import looks_like_cfusd
+def register(log_format: LogFormat) -> LogFormat:
+    """Make `read_log` read `log_format`. A suffix belongs to one format. Content tests run
+    newest first: a format registered later is more specific than the loose tests declared
+    first (any text whose first line has a comma is a CSV)."""
+    for suffix in log_format.suffixes:
+        if not suffix.startswith(".") or suffix != suffix.lower():
+            raise ValueError(f"{log_format.name}: suffix {suffix!r} is not like '.csv'")
+        if (owner := _by_suffix(suffix)) is not None:
+            raise ValueError(f"{log_format.name}: suffix {suffix} is already {owner.name}'s")
+    if not log_format.suffixes and log_format.sniff is None:
+        raise ValueError(f"{log_format.name}: needs a suffix or a content test")
+    FORMATS.append(log_format)
+    return log_format
 
-    return looks_like_cfusd(head)
+
+def lazy(module: str, function: str) -> Callable[..., Any]:
+    """`module.function`, imported when first called: pyulog, pymavlink and rerun load only
+    for their own logs."""
+
+    def call(*args: Any) -> Any:
+        return getattr(importlib.import_module(module), function)(*args)
+
+    return call
+
+
+def read_log(
+    path: Path, mapping: ColumnMapping | None = None, vehicle: Vehicle | str | None = None
+) -> FlightLog:
+    """A flight log of any registered format: CSV or Parquet through `mapping` (default: our
+    own column names), one of our rerun recordings (.rrd, a fixed layout), a Crazyflie microSD
+    log (through `mapping`, default the packaged Crazyflie one), PX4 and ArduPilot logs.
+    `vehicle` (a Vehicle, a packaged name or a YAML; default nano) turns logged thrust into
+    rotor speeds through its C_T."""
+    path = Path(path)
+    log_format = _by_suffix(path.suffix.lower()) or _sniff(path)
+    return log_format.read(path, mapping, vehicle)
+
+
+def known_formats() -> str:
+    """The registered formats in a sentence, for --help and messages."""
+    return ", ".join(f"{f.name} ({_recognised_by(f)})" for f in FORMATS)
+
+
+def _recognised_by(log_format: LogFormat) -> str:
+    suffixes = ", ".join(log_format.suffixes)
+    if log_format.sniff is None:
+        return suffixes
+    return f"{suffixes} or by content" if suffixes else "by content"
+
+
+def _by_suffix(suffix: str) -> LogFormat | None:
+    return next((f for f in FORMATS if suffix in f.suffixes), None)
+
+
+def _sniff(path: Path) -> LogFormat:
+    try:
+        with path.open("rb") as f:
+            head = f.read(SNIFF_BYTES)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such flight log") from None
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read ({err.strerror})") from None
+    sniffing = [(f, f.sniff) for f in reversed(FORMATS) if f.sniff is not None]
+    for log_format, sniff in sniffing:
+        if sniff(head):
+            return log_format
+    suffixes = ", ".join(s for f in FORMATS for s in f.suffixes)
+    sniffed = ", ".join(f.name for f, _ in sniffing)
+    raise ConfigError(
+        f"{path}: not a flight log format we know (suffix {path.suffix or 'none'}); known: "
+        f"{suffixes} by suffix, and by content: {sniffed}"
+    )
 
 
 def is_dataflash_text(head: bytes) -> bool:
@@ -63,57 +132,31 @@ def _is_csv(head: bytes) -> bool:
     return bool(lines) and "," in lines[0]
 
 
-# Suffix (lower case) -> reader.
-READERS: dict[str, Reader] = {
-    ".csv": read_table_log,
-    ".parquet": read_table_log,
-    ".rrd": _recording,
-    # autopilot logs (learner/flightlogs/ulog.py, mavlog.py)
-    ".ulg": _autopilot("learner.flightlogs.ulog", "read_ulog"),
-    ".bin": _autopilot("learner.flightlogs.mavlog", "read_dataflash"),
-    ".tlog": _autopilot("learner.flightlogs.mavlog", "read_tlog"),
-}
+def _recording(path: Path, mapping: ColumnMapping | None, vehicle: Vehicle | str | None):
+    # a fixed layout: no mapping, and rotor speeds recorded as such
+    from learner.flightlogs.recording_log import read_recording_log
 
-# For suffixes not in READERS, in order: (what it is, test on the first 4 KiB, reader).
-SNIFFERS: list[tuple[str, Callable[[bytes], bool], Reader]] = [
-    ("Crazyflie microSD log", _is_cfusd, _cfusd),
-    (
-        "ArduPilot DataFlash text log",
-        is_dataflash_text,
-        _autopilot("learner.flightlogs.mavlog", "read_dataflash"),
-    ),
-    ("CSV", _is_csv, read_table_log),
-]
+    return read_recording_log(path)
 
 
-def read_log(
-    path: Path, mapping: ColumnMapping | None = None, vehicle: Vehicle | str | None = None
-) -> FlightLog:
-    """A flight log of any known format: CSV or Parquet through `mapping` (default: our own
-    column names), one of our rerun recordings (.rrd, a fixed layout), a Crazyflie microSD log
-    (through `mapping`, default the packaged Crazyflie one). `vehicle` (a Vehicle, a packaged
-    name or a YAML; default nano) turns logged thrust into rotor speeds through its C_T."""
-    path = Path(path)
-    reader = READERS.get(path.suffix.lower())
-    if reader is None:
-        reader = _sniff(path)
-    return reader(path, mapping, vehicle)
+_TABLE = lazy("learner.flightlogs.tables", "read_table_log")
+_MAVLOG = "learner.flightlogs.mavlog"
 
-
-def _sniff(path: Path) -> Reader:
-    try:
-        with path.open("rb") as f:
-            head = f.read(4096)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such flight log") from None
-    except OSError as err:
-        raise ConfigError(f"{path}: cannot read ({err.strerror})") from None
-    for _, test, reader in SNIFFERS:
-        if test(head):
-            return reader
-    suffixes = ", ".join(READERS)
-    sniffed = ", ".join(what for what, _, _ in SNIFFERS)
-    raise ConfigError(
-        f"{path}: not a flight log format we know (suffix {path.suffix or 'none'}); known: "
-        f"{suffixes} by suffix, and by content: {sniffed}"
+# Content tests run from the last declared up: the loosest (CSV) is declared first.
+register(LogFormat("CSV", _TABLE, (".csv",), _is_csv))
+register(LogFormat("Parquet", _TABLE, (".parquet",)))
+register(LogFormat("groundfx rerun recording", _recording, (".rrd",)))
+register(LogFormat("PX4 ULog", lazy("learner.flightlogs.ulog", "read_ulog"), (".ulg",)))
+register(LogFormat("MAVLink telemetry log", lazy(_MAVLOG, "read_tlog"), (".tlog",)))
+register(
+    LogFormat(
+        "ArduPilot DataFlash log", lazy(_MAVLOG, "read_dataflash"), (".bin",), is_dataflash_text
     )
+)
+register(
+    LogFormat(
+        "Crazyflie microSD log",
+        lazy("learner.flightlogs.cfusd", "read_cfusd_log"),
+        sniff=lazy("learner.flightlogs.cfusd", "looks_like_cfusd"),
+    )
+)

@@ -17,11 +17,11 @@ from learner.gap.ground_level import level_logs
 from learner.gap.plausibility import check as check_plausible
 from learner.gap.regimes import REGIMES, RegimeBin, regime_table, regime_variables, rules
 from learner.gap.residual import (
-    SMOOTH_WINDOW_S,
     force_gap_ms,
     gap_over_floor_ms,
     measured_floor_ms,
     residual_n,
+    white_floor_ms,
 )
 from learner.gap.rollout import HORIZON_S, rms, rollout_errors, shrink
 from learner.gap.search import forward_search
@@ -239,8 +239,8 @@ def held_out_gap(problem: gapfit.Problem, values: Values) -> dict[str, Any]:
     after_f = _pooled_gap(problem.flights, after, problem.noise_var)
     out["force_rms_n"] = {"before": before_f, "after": after_f, "shrink": shrink(before_f, after_f)}
     measured = measured_floor_gap(problem.flights, problem.residuals, after)
-    window = max(1, round(SMOOTH_WINDOW_S / problem.flights[0].dt_s))
-    measured["white_floor"] = float(np.sqrt(3.0 * problem.noise_var / window))
+    white = white_floor_ms(problem.noise_var, problem.flights[0].dt_s)
+    measured["white_floor"] = float(np.sqrt(white))
     out["force_rms_n_measured_floor"] = measured
     rb = np.concatenate(
         [rollout_errors(d, problem.nominal, problem.vehicle, HORIZON_S) for d in problem.flights]
@@ -310,9 +310,7 @@ def _per_region(problem: gapfit.Problem, after: list[np.ndarray]) -> list[dict[s
             sel = k == b
             if sel.sum() < 50:
                 continue
-            floor = (
-                3.0 * problem.noise_var / max(1, round(SMOOTH_WINDOW_S / problem.flights[0].dt_s))
-            )
+            floor = white_floor_ms(problem.noise_var, problem.flights[0].dt_s)
             before = float(np.sqrt(max(np.mean(np.sum(sb[sel] ** 2, axis=1)) - floor, 0.0)))
             after_ = float(np.sqrt(max(np.mean(np.sum(sa[sel] ** 2, axis=1)) - floor, 0.0)))
             rows.append(

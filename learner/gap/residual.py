@@ -48,11 +48,13 @@ def force_gap_ms(
     `noise_var` leaves in such an average."""
     window = max(1, round(SMOOTH_WINDOW_S / dt_s))
     smooth = smooth_per_segment(residual, segment, window)
-    return max(float(np.mean(np.sum(smooth**2, axis=1))) - 3.0 * noise_var / window, 0.0)
+    return max(float(np.mean(np.sum(smooth**2, axis=1))) - white_floor_ms(noise_var, dt_s), 0.0)
 
 
-def force_gap_rms(residual: np.ndarray, segment: np.ndarray, dt_s: float) -> float:
-    return float(np.sqrt(force_gap_ms(residual, segment, dt_s)))
+def white_floor_ms(noise_var: float, dt_s: float) -> float:
+    """What white noise of per-component variance `noise_var` leaves in a SMOOTH_WINDOW_S
+    average of samples `dt_s` apart (N^2, summed over the three components)."""
+    return 3.0 * noise_var / max(1, round(SMOOTH_WINDOW_S / dt_s))
 
 
 def measured_floor_ms(residual: np.ndarray, segment: np.ndarray, dt_s: float) -> float:

@@ -9,12 +9,18 @@ on the last layer with a forgetting factor, as Neural-Fly adapts its last layer)
 `composite` (the coefficients of a basis learnt over several grounds, adapted by a Kalman
 filter with a tracking-error term, published only past a confidence test, with a memory of
 grounds; learner/online/composite.py).
+
+`OnlineSettings` is the one declaration of these settings: a field declared `tunable` is also
+the MAVLink parameter it names (GFX_OL_*), whose default, range and description
+autopilot/params.py reads from here.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import struct
 from dataclasses import dataclass
+from typing import Any
 
 from learner.online.names import METHODS, NEEDS_BASIS, NEEDS_MEMORY, PROTECTING
 from simbridge.config import ConfigError, param, range_text
@@ -26,7 +32,16 @@ __all__ = [
     "PROTECTING",
     "OnlineSettings",
     "check_settings",
+    "tuned_in_flight",
 ]
+
+
+def tunable(mavlink: str, default: float, *, lo: float, hi: float, unit: str = "", doc: str) -> Any:
+    """A setting a ground station tunes in flight as the MAVLink parameter `mavlink`
+    (autopilot/params.py reads its name, default, range and doc from here). Its range is
+    closed: a parameter is refused outside [lo, hi]."""
+    meta = dict(param(default, unit=unit, lo=lo, hi=hi, doc=doc).metadata, mavlink=mavlink)
+    return dataclasses.field(default=default, metadata=meta)
 
 
 @dataclass(frozen=True)
@@ -36,22 +51,40 @@ class OnlineSettings:
 
     method: str = "naive"
     batch_size: int = param(64, lo=8, hi=4096, doc="new samples per update (thesis: 64)")
-    learning_rate: float = param(
-        1e-3, lo=0.0, hi=1.0, lo_open=True, doc="Adam step size of the gradient methods"
+    learning_rate: float = tunable(
+        "GFX_OL_LR", 1e-3, lo=1e-7, hi=1.0, doc="Adam step size of the gradient methods"
     )
     steps: int = param(10, lo=1, hi=1000, doc="Adam steps on each batch")
-    penalty: float = param(
-        1.0, lo=0.0, hi=1e6, doc="lambda: weight of the constraint, margin or EWC penalty"
+    penalty: float = tunable(
+        "GFX_OL_LAMBDA",
+        1.0,
+        lo=0.0,
+        hi=1e6,
+        doc="lambda: weight of the constraint, margin or EWC penalty",
     )
-    margin: float = param(0.02, lo=0.0, hi=10.0, doc="free deviation of each weight (margin)")
-    forgetting: float = param(
-        0.95, lo=0.5, hi=1.0, doc="RLS forgetting factor per sample (1: remember all)"
+    margin: float = tunable(
+        "GFX_OL_MARGIN", 0.02, lo=0.0, hi=10.0, doc="free deviation of each weight (margin)"
     )
-    rls_initial_covariance: float = param(
-        1e-6, lo=0.0, hi=1e6, lo_open=True, doc="RLS: P0 = p0 I + s^2 u u^T: trust in the shape"
+    forgetting: float = tunable(
+        "GFX_OL_FORGET",
+        0.95,
+        lo=0.5,
+        hi=1.0,
+        doc="RLS forgetting factor per sample (1: remember all)",
     )
-    rls_scale_sd: float = param(
-        1.0, lo=0.0, hi=100.0, doc="RLS: s, prior sd of a relative change of the effect's size"
+    rls_initial_covariance: float = tunable(
+        "GFX_OL_RLS_P0",
+        1e-6,
+        lo=1e-9,
+        hi=1e6,
+        doc="RLS: p0 of P0 = p0 I + s^2 u u^T, the trust in the offline shape",
+    )
+    rls_scale_sd: float = tunable(
+        "GFX_OL_RLS_SC",
+        1.0,
+        lo=0.0,
+        hi=100.0,
+        doc="RLS: s, prior sd of a relative change of the effect's size",
     )
     replay_samples: int = param(64, lo=0, hi=4096, doc="offline samples mixed into a batch")
     holdout_every: int = param(
@@ -80,8 +113,13 @@ class OnlineSettings:
     composite_memory_samples: float = param(
         500.0, lo=1.0, hi=1e9, doc="composite: samples after which the prior uncertainty is back"
     )
-    composite_tracking_n_s_m: float = param(
-        0.1, unit="N s/m", lo=0.0, hi=10.0, doc="composite: force per m/s of tracking error"
+    composite_tracking_n_s_m: float = tunable(
+        "GFX_OL_TRACK",
+        0.1,
+        unit="N s/m",
+        lo=0.0,
+        hi=10.0,
+        doc="composite: force per m/s of tracking error (0: off)",
     )
     composite_tracking_below_m: float = param(
         0.25,
@@ -90,8 +128,8 @@ class OnlineSettings:
         hi=100.0,
         doc="composite: the tracking term only this near the surface",
     )
-    composite_confidence: float = param(
-        30.0, lo=0.0, hi=1e6, doc="composite: likelihood ratio a change must exceed"
+    composite_confidence: float = tunable(
+        "GFX_OL_CONF", 30.0, lo=0.0, hi=1e6, doc="composite: likelihood ratio a change must exceed"
     )
     composite_far_n: float = param(
         3e-4,
@@ -123,8 +161,23 @@ def check_settings(settings: OnlineSettings) -> None:
             continue
         value = getattr(settings, f.name)
         lo, hi = f.metadata["lo"], f.metadata["hi"]
+        if "mavlink" in f.metadata:  # arrives as REAL32: a bound rounded so still counts
+            lo, hi = min(lo, _real32(lo)), max(hi, _real32(hi))
         low_ok = value > lo if f.metadata["lo_open"] else value >= lo
         if not (low_ok and value <= hi):
             raise ConfigError(
                 f"online {f.name}: {value!r} is outside the allowed range {range_text(f)}"
             )
+
+
+def _real32(value: float) -> float:
+    return struct.unpack("<f", struct.pack("<f", value))[0]
+
+
+def tuned_in_flight() -> dict[str, str]:
+    """MAVLink parameter name -> field, for the settings a ground station tunes in flight."""
+    return {
+        f.metadata["mavlink"]: f.name
+        for f in dataclasses.fields(OnlineSettings)
+        if "mavlink" in f.metadata
+    }

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from learner.flightlogs.readers import known_formats
 from simbridge.config import ConfigError
 
 
@@ -20,7 +21,7 @@ def add_parser(sub: Any) -> None:
     d = g.add_parser("diagnose", help="residuals, effects and a corrected world from flight logs")
     d.add_argument(
         "logs", type=Path, nargs="+",
-        help="flight logs (.csv, .parquet, .rrd, .ulg, .bin, .log, .tlog, Crazyflie microSD)",
+        help=f"flight logs: {known_formats()}",
     )  # fmt: skip
     d.add_argument("--world", required=True, help="the nominal world (YAML or packaged name)")
     d.add_argument("--holdout", type=Path, nargs="+", default=[], help="logs to score only")
@@ -51,7 +52,7 @@ def add_parser(sub: Any) -> None:
     c = g.add_parser("convert", help="write any readable flight log in our format")
     c.add_argument(
         "log", type=Path,
-        help="flight log (.csv, .parquet, .rrd, .ulg, .bin, .log, .tlog, Crazyflie microSD)",
+        help=f"flight log: {known_formats()}",
     )  # fmt: skip
     c.add_argument("out", type=Path, help="our format: .csv (with a .json sidecar) or .parquet")
     c.add_argument(

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from learner.online.names import METHODS
+from learner.online.names import METHODS, method_number
 from simbridge.config import ConfigError
 
 
@@ -19,9 +19,7 @@ def online_overrides(args: argparse.Namespace) -> dict[str, float]:
         return {}
     if getattr(args, "model", None) not in (None, "neural"):
         raise ConfigError(f"--online {method}: needs --model neural, not --model {args.model}")
-    from autopilot.params import ONLINE_METHODS  # the parser needs none of the autopilot
-
-    return {"GFX_OL_METHOD": float(ONLINE_METHODS.index(method))}
+    return {"GFX_OL_METHOD": float(method_number(method))}
 
 
 def online_options(args: argparse.Namespace, reproducible: bool) -> object:

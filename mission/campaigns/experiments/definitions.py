@@ -12,9 +12,10 @@ import hashlib
 import json
 from dataclasses import dataclass
 
+from learner.online.names import METHODS, PROTECTING
 from mission.campaigns.experiments.missions import MISSION_KINDS, make_mission
 
-ONLINE_METHODS = ("naive", "constraint", "margin", "ewc", "replay", "rls", "composite")
+ONLINE_METHODS = METHODS  # the conditions fly every online method there is
 BASIS = "grounds"  # composite adapts the basis learnt over several grounds (learner/basis.py)
 
 
@@ -238,7 +239,7 @@ def _remembering() -> Experiment:
         (
             *(
                 Expectation(m, "naive", "lower", f"{m} forgets less than naive")
-                for m in ("constraint", "margin", "ewc", "replay", "composite")
+                for m in (*PROTECTING, "composite")  # composite: its memory of grounds
             ),
             Expectation("composite", "never-adapted", "similar", "composite recalls rho 1"),
         ),
