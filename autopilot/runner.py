@@ -1,7 +1,10 @@
 """The autopilot's flight loop: simulator link -> state -> commander -> model -> controller.
 
 One control step per HIL_SENSOR, answered with exactly one HIL_ACTUATOR_CONTROLS; the
-sensors' time is the only clock. The loop is the edge; every decision is a pure function.
+sensors' time is the only clock. The loop is the edge; every decision is a pure function:
+the commander's in `commander`, ground contact beside the land detector, the control law,
+anti-windup and bumpless handover in `control`, the learner's sample schedule in `online`,
+the figures after the flight in `summary`.
 """
 
 from __future__ import annotations
@@ -12,178 +15,140 @@ import math
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from autopilot.commander import requests
-from autopilot.commander.commander import CommanderState, Phase, command
-from autopilot.commander.mission_items import MissionItem
-from autopilot.control.controller import control, handover, integrate
+from autopilot.commander.commander import (
+    AIRBORNE_PHASES,
+    Command,
+    CommanderState,
+    Phase,
+    command,
+)
+from autopilot.control.controller import (
+    ControlOutput,
+    control,
+    integral_frozen,
+    integrate,
+    model_handover,
+)
 from autopilot.control.ground_models import (
     GroundEffectInputs,
-    GroundEffectModel,
     NeuralGroundEffect,
     fixed_point_step,
-    make_model,
 )
-from autopilot.control.land_detector import LandDetector, ground_contact
+from autopilot.control.land_detector import (
+    AIRBORNE_MARGIN_M,
+    LandDetector,
+    airborne,
+    landing_contact,
+)
 from autopilot.estimation.navigation import Navigation
+from autopilot.flight_config import AutopilotConfig, Flight
 from autopilot.gcs.ground_station import GroundStation, StepInput
 from autopilot.gcs.link import GcsLink
-from autopilot.gcs.signing import Signing
 from autopilot.identity import identity_named
-from autopilot.metrics import COLUMNS, flight_metrics, ge_error_metrics, trajectory_sha256
-from autopilot.nav_metrics import estimation_error, estimator_metrics
+from autopilot.nav_metrics import estimation_error
 from autopilot.online.learning_sample import learning_sample
-from autopilot.online.online_control import OnlineControl, OnlineOptions, vertical_tracking_error
-from autopilot.params import ParamStore
+from autopilot.online.online_control import OnlineControl, vertical_tracking_error
+from autopilot.online.sample_schedule import SampleSchedule
 from autopilot.recording.record_options import RecordOptions
-from autopilot.recording.recorder import open_recorder
+from autopilot.recording.recorder import Recorder, open_recorder
 from autopilot.simlink import LinkLost, SimLink
+from autopilot.summary import MODES, FlightTrace, flight_figures, trace_log
 from autopilot.truth import true_height_m, true_state
-from autopilot.types import FlightMode, FlightState, Step
+from autopilot.tuning import Tuning
+from autopilot.types import FlightMode, FlightState, Setpoint, Step
+from simbridge.frames import Vec3
 from simbridge.rotors import Quad
-from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
-MODES = [p.value for p in Phase]
+__all__ = ["MODES", "AutopilotConfig", "Flight", "fly_mission"]
+
 AUTO_ARM_AFTER_S = 0.2  # --auto-start: arm once the sensors have been healthy this long
-INTEGRATE_ABOVE_M = 0.005  # the integral runs only this far above resting (not on the ground)
-
-
-@dataclass(frozen=True)
-class AutopilotConfig:
-    sim_url: str
-    vehicle: Vehicle
-    params: ParamStore
-    origin: tuple[float, float, float]  # lat deg, lon deg, alt m of the local frame's origin
-    network: str | Path | None = None  # the neural model's weights (default: by rho)
-    mission: tuple[MissionItem, ...] = ()  # loaded before any ground station speaks
-    auto_start: bool = False  # arm and start the mission without a ground station
-    exit_after_landing: bool = True  # end once a flight has landed and settled
-    identity: str = "px4"
-    gcs_urls: tuple[str, ...] = ()
-    signing: Signing | None = None
-    link_timeout_s: float = 1.0
-    settle_after_landing_s: float = 0.5  # keep logging after disarm, to see any bounce
-    max_flight_s: float = 900.0
-    should_stop: Callable[[], bool] = lambda: False  # a signal asked the loop to end
-    on_event: Callable[[float, str], None] | None = None  # modes, arming, failsafes
-    record_hz: float = 0.0  # > 0: record learning samples at this rate (thesis: 100 Hz)
-    stop_after_samples: int | None = None  # end the flight once this many are recorded
-    on_sample: Callable[[int], None] | None = None  # told the count of recorded samples
-    # told each airborne step (t, messages, the true state as a lab's motion capture would log
-    # it, rotor speeds applied over the last period): the --flight-log of the gap diagnosis
-    on_step: Callable[[float, Step, FlightState, Quad], None] | None = None
-    online: OnlineOptions = OnlineOptions()  # online learning (GFX_OL_METHOD turns it on)
-    record: RecordOptions | None = None  # the flight's rerun recording; None: off
+RESTING_PHASES = (Phase.DISARMED, Phase.ARMED, Phase.LANDED)  # the estimator may assume rest
 
 
 @dataclass
-class Flight:
-    log: np.ndarray
-    summary: dict[str, Any]
-    ended: str  # "landed", "enough samples", "mission time limit", or the lost link's reason
-    samples: np.ndarray | None = None  # learning samples, columns learner.dataset.COLUMNS
+class LoopState:
+    """What the loop carries from one step to the next."""
+
+    cmd: CommanderState = field(default_factory=CommanderState)
+    detector: LandDetector = LandDetector()
+    integral_m_s2: Vec3 = (0.0, 0.0, 0.0)  # the position loop's integral term
+    speeds_rad_s: Quad = (0.0, 0.0, 0.0, 0.0)  # sent at the last step
+    ge_n: Vec3 = (0.0, 0.0, 0.0)  # the ground-effect estimate the controller used
+    output: ControlOutput | None = None  # the controller's, None with the rotors off
+    last_t_s: float = 0.0
+    last_setpoint_z_m: float = 0.0
+    schedule: SampleSchedule = SampleSchedule()
+    drawn_plan: tuple | None = None  # the plan the recording shows
 
 
-RECORDED_PHASES = (Phase.TAKING_OFF, Phase.FLYING, Phase.HOLDING, Phase.LANDING)
-# Samples are taken in the air only: on the ground the contact force would pass for ground
-# effect in equation 3.16.
-AIRBORNE_MARGIN_M = 0.002
+@dataclass
+class Parts:
+    """The flight's running components, opened before the loop and closed after it."""
+
+    config: AutopilotConfig
+    tuning: Tuning
+    nav: Navigation
+    recorder: Recorder
+    online: OnlineControl
+    gcs: GcsLink
+    station: GroundStation
+    link: SimLink
+    on_event: Callable[[float, str], None]
+    trace: FlightTrace
+    resting_height_m: float
 
 
-class Tuning:
-    """The parameter-derived settings, rebuilt only when a parameter changes."""
-
-    def __init__(self, config: AutopilotConfig) -> None:
-        self.config = config
-        self.version = -1  # the parameters' version these settings were built from
-        self.model_key: tuple[str, float] | None = None
-        self.model: GroundEffectModel | None = None
-        self.refresh()
-
-    def refresh(self) -> bool:
-        store = self.config.params
-        if store.version == self.version:
-            return False
-        self.version = store.version
-        self.controller = store.controller()
-        self.commander = store.commander()
-        self.land_detector = store.land_detector()
-        gains = self.controller
-        # the speed limits' lead: steady speed = error * a0 / a1 (commander.limited_setpoint)
-        self.lead_s = gains.position_d / gains.position_p if gains.position_p > 0 else 2.0
-        self.vertical_lead_s = gains.vertical_d / gains.vertical_p if gains.vertical_p > 0 else 2.0
-        key = store.model()
-        if key != self.model_key:
-            self.model_key = key
-            self.model = make_model(key[0], self.config.vehicle, key[1], self.config.network)
-        return True
+@dataclass(frozen=True)
+class Estimate:
+    state: FlightState
+    height_m: float
+    seconds: float  # the estimator's prediction, for the timings
 
 
-def landing_target_xy(cmd: CommanderState) -> tuple[float, float] | None:
-    """Where the mission meant to land: its landing item's position, else the last waypoint
-    flown before it, else home (a return)."""
-    last = None
-    for step in cmd.plan:
-        if step.kind == "land":
-            return step.position_m[:2] if step.position_m is not None else last
-        if step.kind == "return":
-            return cmd.home_m[:2] if cmd.home_m is not None else last
-        if step.position_m is not None:
-            last = step.position_m[:2]
-    return None
+@dataclass(frozen=True)
+class Commanded:
+    """The commander's answer this step, and whether the vehicle looked in ground contact."""
+
+    result: Command
+    contact: bool
 
 
-def fly_mission(config: AutopilotConfig) -> Flight:
-    """Run the autopilot against the simulator at `config.sim_url` until the flight ends."""
+def _recording_options(config: AutopilotConfig) -> RecordOptions | None:
+    """The recording's options with which rows are airborne, for readers of the recording."""
+    record = config.record
+    if record is None:
+        return None
+    info = {
+        "airborne_modes": [p.value for p in AIRBORNE_PHASES],
+        "airborne_margin_m": AIRBORNE_MARGIN_M,
+    }
+    return dataclasses.replace(record, info={**(record.info or {}), **info})
+
+
+def _open(config: AutopilotConfig, trace: FlightTrace) -> Parts:
+    """The recorder first (the simulator's clock starts when the link connects), the learner,
+    the ground stations, then the simulator link."""
     vehicle = config.vehicle
     resting_height = vehicle.body_size_m[2] / 2.0  # the range sensor sits at the centre of mass
-    channels = vehicle.actuator_channels
-    n_max = vehicle.max_rotor_speed_rad_s
-    tuning = Tuning(config)
-    rows: list[tuple[float, ...]] = []
-    timings: list[float] = []  # controller and ground-effect model, per step
-    step_timings: list[float] = []  # the same with the estimator's prediction before it
-    correction_timings: list[float] = []  # the estimator's fusions, after the reply
-    ge_pairs: list[tuple[float, float, float]] = []  # (height, predicted, true) vertical GE
-    speeds = (0.0, 0.0, 0.0, 0.0)
-    ge = (0.0, 0.0, 0.0)
+    tuning = Tuning(config.params, vehicle, config.network)
     nav = Navigation(config.params.estimator(), config.origin, resting_height)
-    nav_errors: list[tuple[float, ...]] = []
-    integral = (0.0, 0.0, 0.0)  # the position loop's integral term, m/s^2
-    detector = LandDetector()
-    last_t = 0.0
-    last_setpoint_z = 0.0
-    output = None
-    cmd_state = CommanderState()
-    ended = "landed"
-    samples: list[tuple[float, ...]] = []
-    next_sample_s = 0.0
-    # The recorder first: the simulator's clock starts when the link connects.
-    record = config.record
-    if record is not None:  # which rows are airborne, for readers of the recording
-        airborne = {
-            "airborne_modes": [p.value for p in RECORDED_PHASES],
-            "airborne_margin_m": AIRBORNE_MARGIN_M,
-        }
-        record = dataclasses.replace(record, info={**(record.info or {}), **airborne})
-    recorder = open_recorder(record, vehicle, MODES)
+    recorder = open_recorder(_recording_options(config), vehicle, MODES)
     online_options = dataclasses.replace(config.online, on_report=recorder.learner)
     online = OnlineControl(online_options, config.params, config.network)
     online.refresh(tuning.model, 0.0)
     online.wait_ready()
     user_on_event = config.on_event or (lambda t, text: None)
 
-    failsafes: list[str] = []  # for the summary
-
     def on_event(t: float, text: str) -> None:
         user_on_event(t, text)
         if text.startswith("failsafe"):
-            failsafes.append(f"{text} at {t:.2f} s")
+            trace.failsafes.append(f"{text} at {t:.2f} s")
         recorder.event(text, "WARN" if text.startswith("failsafe") else "INFO", t)
 
     gcs = GcsLink(list(config.gcs_urls), config.signing)
@@ -202,275 +167,290 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         raise
     recorder.watch_counters("sim", link.counters)
     recorder.watch_counters("gcs", gcs.counters.recorded)
-    drawn_plan: tuple | None = None
+    return Parts(
+        config, tuning, nav, recorder, online, gcs, station, link, on_event, trace, resting_height
+    )
+
+
+def _estimate(p: Parts, s: LoopState, step: Step) -> Estimate | None:
+    """The estimator's state at this step; None while it aligns (the rotors stay off)."""
+    t_nav = time.perf_counter()
+    if not p.nav.ready:  # aligning: on the tick's pose or fix, which follow its IMU
+        p.link.rest_of_tick(step)
+    p.nav.predict(step)
+    seconds = time.perf_counter() - t_nav
+    if not p.nav.ready:  # aligning: the first pose or fix has not come yet
+        channels = p.config.vehicle.actuator_channels
+        p.link.send(step.sensor["time_usec"], (0.0, 0.0, 0.0, 0.0), channels, False)
+        return None
+    if s.cmd.phase in RESTING_PHASES:
+        p.nav.resting()
+    return Estimate(p.nav.state(), p.nav.height_m(), seconds)
+
+
+def _before_command(p: Parts, s: LoopState, t: float, state: FlightState) -> None:
+    """A mission given on the command line, the auto-start, changed parameters."""
+    config, tuning = p.config, p.tuning
+    if not p.trace.rows and config.mission:
+        s.cmd = p.station.load_mission(s.cmd, config.mission)
+    if (
+        config.auto_start
+        and s.cmd.phase == Phase.DISARMED
+        and t >= AUTO_ARM_AFTER_S
+        and s.cmd.touchdown_s is None
+        and not p.link.behind()  # caught up with a backlog of stand-time ticks
+    ):
+        s.cmd, _ = requests.arm(s.cmd, t, state.position_m, None, False)
+        s.cmd, _ = requests.set_mode(
+            s.cmd, FlightMode.MISSION, t, state.position_m, tuning.commander
+        )
+    if tuning.refresh():
+        p.online.refresh(tuning.model, t)
+        p.nav.params = config.params.estimator()
+
+
+def _command(p: Parts, s: LoopState, t: float, estimate: Estimate) -> Commanded:
+    """Ground contact, the land detector, then the commander's phase and setpoint."""
+    tuning, state, height = p.tuning, estimate.state, estimate.height_m
+    landing = s.cmd.phase == Phase.LANDING
+    contact = landing_contact(
+        height,
+        p.resting_height_m,
+        state.velocity_m_s[2],
+        state.position_m[2],
+        s.last_setpoint_z_m if landing else None,
+        s.output.commanded_acceleration_m_s2[2] if s.output is not None else None,
+        tuning.land_detector,
+    )
+    s.detector = s.detector.step(t, contact)
+    cmd = command(
+        s.cmd,
+        tuning.commander,
+        t,
+        state.position_m,
+        height,
+        p.resting_height_m,
+        tuning.lead_s,
+        s.detector.landed(t, tuning.land_detector),
+        tuning.vertical_lead_s,
+    )
+    s.cmd = cmd.state
+    return Commanded(cmd, contact)
+
+
+def _control(p: Parts, s: LoopState, t: float, estimate: Estimate, cmd: Command) -> Vec3 | None:
+    """The ground-effect model's estimate and the controller's rotor speeds (off without a
+    setpoint); returns the model's prediction, None with the rotors off."""
+    if cmd.setpoint is None:
+        s.speeds_rad_s, s.ge_n, s.output = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), None
+        s.integral_m_s2 = (0.0, 0.0, 0.0)  # rotors off: the next flight starts afresh
+        return None
+    tuning, vehicle, state = p.tuning, p.config.vehicle, estimate.state
+    t0 = time.perf_counter()
+    replaced = p.online.apply(tuning.model)
+    speeds = s.speeds_rad_s
+    inputs = GroundEffectInputs(estimate.height_m, state.velocity_m_s, state.quaternion, speeds)
+    target = tuning.model.predict(inputs)
+    if replaced is not None and tuning.controller.position_i > 0.0:
+        old = NeuralGroundEffect(replaced).predict(inputs)
+        s.integral_m_s2 = model_handover(s.integral_m_s2, target, old, vehicle.mass_kg)
+    rotor_thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in speeds)
+    s.ge_n = fixed_point_step(s.ge_n, target, rotor_thrust)
+    term = s.output.position_term_m_s2 if s.output is not None else None
+    s.output = control(
+        state, cmd.setpoint, s.ge_n, vehicle, tuning.controller, s.integral_m_s2, term,
+        t - s.last_t_s,
+    )  # fmt: skip
+    s.speeds_rad_s = s.output.rotor_speeds_rad_s
+    s.last_setpoint_z_m = cmd.setpoint.position_m[2]
+    p.trace.timings.append(time.perf_counter() - t0)
+    p.trace.step_timings.append(p.trace.timings[-1] + estimate.seconds)
+    return target
+
+
+def _integrate(p: Parts, s: LoopState, t: float, height_m: float, contact: bool) -> None:
+    """The integral for the next step, unless anti-windup holds it."""
+    if s.output is None:
+        return
+    frozen = integral_frozen(
+        s.cmd.phase in AIRBORNE_PHASES,
+        s.cmd.phase == Phase.TAKING_OFF,
+        height_m,
+        p.resting_height_m,
+        contact,
+        s.output.saturated,
+    )
+    s.integral_m_s2 = integrate(
+        s.integral_m_s2, s.output.pd_acceleration_m_s2, t - s.last_t_s, p.tuning.controller, frozen
+    )
+
+
+def _sample(
+    p: Parts, s: LoopState, t: float, step: Step, estimate: Estimate, setpoint: Setpoint | None,
+    applied: Quad, in_the_air: bool,
+) -> bool:  # fmt: skip
+    """A learning sample when one is due, to the learner and, when recording samples, to the
+    trace; True once enough are recorded."""
+    config = p.config
+    rate_hz = config.record_hz or p.online.sample_hz
+    if not s.schedule.due(t, rate_hz, in_the_air):
+        return False
+    state, vehicle = estimate.state, config.vehicle
+    row = learning_sample(
+        t, step, state, estimate.height_m, applied, vehicle, p.nav.accel_bias_m_s2()
+    )
+    p.online.submit(row, vertical_tracking_error(state, setpoint))
+    samples = p.trace.samples
+    if config.record_hz > 0.0:
+        samples.append(row)
+    s.schedule = s.schedule.after_sample(t, rate_hz)
+    if config.on_sample is not None:
+        config.on_sample(len(samples))
+    return (
+        config.record_hz > 0.0
+        and config.stop_after_samples is not None
+        and len(samples) >= config.stop_after_samples
+    )
+
+
+def _report(
+    p: Parts, s: LoopState, t: float, step: Step, estimate: Estimate, cmd: Command, applied: Quad,
+    in_the_air: bool, inp: StepInput,
+) -> None:  # fmt: skip
+    """The step's truth to the flight log, the ground stations, the recording and the trace."""
+    config, nav, recorder = p.config, p.nav, p.recorder
+    state = estimate.state
+    flying = s.cmd.phase in AIRBORNE_PHASES
+    actual = true_state(step, config.origin) or state
+    true_height = true_height_m(step, actual, nav.terrain_m)
+    # the flight log's rows: in the air by the truth, as the recording's reader judges
+    if config.on_step is not None and airborne(true_height, p.resting_height_m) and flying:
+        config.on_step(t, step, actual, applied)
+    p.station.after_step(s.cmd, inp, cmd.reached, cmd.events)
+    if s.cmd.plan is not s.drawn_plan:
+        s.drawn_plan = s.cmd.plan
+        recorder.mission(s.cmd.plan, state.position_m, s.cmd.home_m, t)
+    nav_error = estimation_error(state, actual)
+    if in_the_air and flying:
+        p.trace.nav_errors.append(nav_error)
+    recorder.estimator(t, nav_error, nav.quality.this_step)
+    recorder.step(
+        t, step, actual, true_height, s.cmd.phase, cmd.armed, cmd.setpoint, s.ge_n,
+        s.speeds_rad_s, s.output, flight_mode=s.cmd.mode.value,
+    )  # fmt: skip
+    for text in nav.events:  # after the step: the recording opens with the mode
+        p.on_event(t, text)
+    nav.events.clear()
+    zd = cmd.setpoint.position_m[2] if cmd.setpoint is not None else math.nan
+    pos, v = actual.position_m, actual.velocity_m_s
+    p.trace.rows.append((t, *pos, *v, zd, true_height, MODES.index(s.cmd.phase)))
+
+
+def _ended(config: AutopilotConfig, cmd: CommanderState, t: float) -> str | None:
+    """Why the flight ends after this step, or None."""
+    if (
+        config.exit_after_landing
+        and cmd.phase == Phase.LANDED
+        and t - (cmd.touchdown_s or t) >= config.settle_after_landing_s
+    ):
+        return "landed"
+    if t >= config.max_flight_s:
+        return "mission time limit"
+    if config.should_stop():
+        return "stopped"
+    return None
+
+
+def _step(p: Parts, s: LoopState) -> str | None:
+    """One control step: link -> estimate -> command -> control -> send, then what is off
+    the control path. Returns why the flight ends, or None."""
+    step = p.link.receive_step()
+    t_us = step.sensor["time_usec"]
+    t = t_us * 1e-6
+    estimate = _estimate(p, s, step)
+    if estimate is None:
+        return None
+    _before_command(p, s, t, estimate.state)
+    commanded = _command(p, s, t, estimate)
+    cmd = commanded.result
+    in_the_air = airborne(estimate.height_m, p.resting_height_m)
+    applied = s.speeds_rad_s  # the rotor speeds of the interval that ended at t
+    target = _control(p, s, t, estimate, cmd)
+    n_max = p.config.vehicle.max_rotor_speed_rad_s
+    channels = p.config.vehicle.actuator_channels
+    p.link.send(t_us, tuple(n / n_max for n in s.speeds_rad_s), channels, cmd.armed)
+    # off the control path from here: the simulator steps meanwhile
+    _integrate(p, s, t, estimate.height_m, commanded.contact)
+    s.last_t_s = t
+    inp = StepInput(
+        t, time.monotonic(), estimate.state, estimate.height_m, p.resting_height_m,
+        p.nav.position_lost(t),
+    )  # fmt: skip
+    # the rest of the tick (its other sensors, then its truth) for the fusions
+    p.link.receive_truth(step)
+    t_nav = time.perf_counter()
+    p.nav.correct(step)
+    p.trace.correction_timings.append(time.perf_counter() - t_nav)
+    truth = step.latest.get("DEBUG_VECT")
+    if target is not None and in_the_air and truth is not None:
+        p.trace.ge_pairs.append((estimate.height_m, target[2], truth["z"]))
+    flying = in_the_air and s.cmd.phase in AIRBORNE_PHASES
+    if _sample(p, s, t, step, estimate, cmd.setpoint, applied, flying):
+        return "enough samples"
+    _report(p, s, t, step, estimate, cmd, applied, in_the_air, inp)
+    # what the ground stations asked since, and the failsafes: for the next step (a real
+    # autopilot's commander runs beside its control loop, not in it)
+    s.cmd = p.station.before_step(s.cmd, inp)
+    return _ended(p.config, s.cmd, t)
+
+
+def _summary(
+    p: Parts, s: LoopState, ended: str, wall_s: float, online_summary: dict[str, Any]
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """The trajectory and the summary, with the links' counters and the learner's report."""
+    summary: dict[str, Any] = {"ended": ended, "landed": ended == "landed"}
+    log = trace_log(p.trace)
+    summary.update(flight_figures(p.trace, log, s.cmd, p.resting_height_m, wall_s, p.nav))
+    summary.update(
+        model=p.tuning.model.name,
+        malformed=p.link.malformed,
+        unknown=p.link.unknown,
+        gcs=p.gcs.counters.as_dict(),
+        mission_items=len(p.station.items),
+        touchdown_declared_s=s.cmd.touchdown_s,
+        failsafes=p.trace.failsafes,
+        **online_summary,
+    )
+    return log, summary
+
+
+def fly_mission(config: AutopilotConfig) -> Flight:
+    """Run the autopilot against the simulator at `config.sim_url` until the flight ends."""
+    trace = FlightTrace()
+    p = _open(config, trace)
+    s = LoopState()
+    ended: str | None = None
     wall0 = time.perf_counter()
     try:
-        while True:
-            step = link.receive_step()
-            t_us = step.sensor["time_usec"]
-            t = t_us * 1e-6
-            t_nav = time.perf_counter()
-            if not nav.ready:  # aligning: on the tick's pose or fix, which follow its IMU
-                link.rest_of_tick(step)
-            nav.predict(step)
-            nav_s = time.perf_counter() - t_nav
-            if not nav.ready:  # aligning: the first pose or fix has not come yet
-                link.send(t_us, (0.0, 0.0, 0.0, 0.0), channels, False)
-                continue
-            if cmd_state.phase in (Phase.DISARMED, Phase.ARMED, Phase.LANDED):
-                nav.resting()
-            state = nav.state()
-            height = nav.height_m()
-            if not rows and config.mission:
-                cmd_state = station.load_mission(cmd_state, config.mission)
-            if (
-                config.auto_start
-                and cmd_state.phase == Phase.DISARMED
-                and t >= AUTO_ARM_AFTER_S
-                and cmd_state.touchdown_s is None
-                and not link.behind()  # caught up with a backlog of stand-time ticks
-            ):
-                cmd_state, _ = requests.arm(cmd_state, t, state.position_m, None, False)
-                cmd_state, _ = requests.set_mode(
-                    cmd_state, FlightMode.MISSION, t, state.position_m, tuning.commander
-                )
-            if tuning.refresh():
-                online.refresh(tuning.model, t)
-                nav.params = config.params.estimator()
-            below = (
-                state.position_m[2] - last_setpoint_z if cmd_state.phase == Phase.LANDING else 0.0
-            )
-            # the lift the controller demands of rotors and ground effect together, over the
-            # weight: below 1 it pushes down (a vehicle that does not follow is held up)
-            thrust_fraction = (
-                1.0 + output.commanded_acceleration_m_s2[2] / GRAVITY_M_S2
-                if output is not None
-                else 0.0
-            )
-            contact = ground_contact(
-                height,
-                resting_height,
-                state.velocity_m_s[2],
-                below,
-                thrust_fraction,
-                tuning.land_detector,
-            )
-            detector = detector.step(t, contact)
-            cmd = command(
-                cmd_state,
-                tuning.commander,
-                t,
-                state.position_m,
-                height,
-                resting_height,
-                tuning.lead_s,
-                detector.landed(t, tuning.land_detector),
-                tuning.vertical_lead_s,
-            )
-            cmd_state = cmd.state
-            airborne = height > resting_height + AIRBORNE_MARGIN_M
-            applied = speeds  # the rotor speeds of the interval that ended at t
-            if cmd.setpoint is not None:
-                t0 = time.perf_counter()
-                replaced = online.apply(tuning.model)
-                inputs = GroundEffectInputs(height, state.velocity_m_s, state.quaternion, speeds)
-                target = tuning.model.predict(inputs)
-                if replaced is not None and tuning.controller.position_i > 0.0:
-                    # bumpless: the new model takes over what the integral held of it
-                    old = NeuralGroundEffect(replaced).predict(inputs)
-                    m = vehicle.mass_kg
-                    change = ((target[0] - old[0]) / m, (target[1] - old[1]) / m,
-                              (target[2] - old[2]) / m)  # fmt: skip
-                    integral = handover(integral, change)
-                rotor_thrust = vehicle.thrust_coefficient_n_s2 * sum(n * n for n in speeds)
-                ge = fixed_point_step(ge, target, rotor_thrust)
-                term = output.position_term_m_s2 if output is not None else None
-                output = control(
-                    state, cmd.setpoint, ge, vehicle, tuning.controller, integral, term, t - last_t
-                )
-                speeds = output.rotor_speeds_rad_s
-                last_setpoint_z = cmd.setpoint.position_m[2]
-                timings.append(time.perf_counter() - t0)
-                step_timings.append(timings[-1] + nav_s)
-            else:
-                speeds, ge, output = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), None
-                integral = (0.0, 0.0, 0.0)  # rotors off: the next flight starts afresh
-            link.send(t_us, tuple(n / n_max for n in speeds), channels, cmd.armed)
-            # off the control path from here: the simulator steps meanwhile
-            if output is not None:
-                # the integral for the next step. Anti-windup: not on the ground (but while
-                # taking off: a vehicle heavier than its file must wind the integral up to
-                # leave it), in contact or saturated. While landing it runs: a vehicle held
-                # up by a force its model lacks must wind it down to come down (PX4's
-                # integrators run until ground contact)
-                frozen = (
-                    cmd_state.phase not in RECORDED_PHASES
-                    or (
-                        cmd_state.phase != Phase.TAKING_OFF
-                        and height < resting_height + INTEGRATE_ABOVE_M
-                    )
-                    or contact
-                    or output.saturated
-                )
-                integral = integrate(
-                    integral,
-                    output.pd_acceleration_m_s2,
-                    t - last_t,
-                    tuning.controller,
-                    frozen,
-                )
-            last_t = t
-            inp = StepInput(
-                t, time.monotonic(), state, height, resting_height, nav.position_lost(t)
-            )
-            # the rest of the tick (its other sensors, then its truth) for the fusions
-            link.receive_truth(step)
-            t_nav = time.perf_counter()
-            nav.correct(step)
-            correction_timings.append(time.perf_counter() - t_nav)
-            truth = step.latest.get("DEBUG_VECT")
-            if cmd.setpoint is not None and airborne and truth is not None:
-                ge_pairs.append((height, target[2], truth["z"]))
-            sample_hz = config.record_hz or online.sample_hz
-            if (
-                sample_hz > 0.0
-                and t >= next_sample_s
-                and airborne
-                and cmd_state.phase in RECORDED_PHASES
-            ):
-                row = learning_sample(
-                    t, step, state, height, applied, vehicle, nav.accel_bias_m_s2()
-                )
-                online.submit(row, vertical_tracking_error(state, cmd.setpoint))
-                if config.record_hz > 0.0:
-                    samples.append(row)
-                period = 1.0 / sample_hz  # on a 100 Hz schedule, 250 Hz steps
-                next_sample_s = next_sample_s + period if t - next_sample_s < period else t + period
-                if config.on_sample is not None:
-                    config.on_sample(len(samples))
-                if (
-                    config.record_hz > 0.0
-                    and config.stop_after_samples is not None
-                    and len(samples) >= config.stop_after_samples
-                ):
-                    ended = "enough samples"
-                    break
-            actual = true_state(step, config.origin) or state
-            true_height = true_height_m(step, actual, nav.terrain_m)
-            # the flight log's rows: in the air by the truth, as the recording's reader judges
-            truly_airborne = true_height > resting_height + AIRBORNE_MARGIN_M
-            if config.on_step is not None and truly_airborne and cmd_state.phase in RECORDED_PHASES:
-                config.on_step(t, step, actual, applied)
-            station.after_step(cmd_state, inp, cmd.reached, cmd.events)
-            if cmd_state.plan is not drawn_plan:
-                drawn_plan = cmd_state.plan
-                recorder.mission(cmd_state.plan, state.position_m, cmd_state.home_m, t)
-            nav_error = estimation_error(state, actual)
-            if airborne and cmd_state.phase in RECORDED_PHASES:
-                nav_errors.append(nav_error)
-            recorder.estimator(t, nav_error, nav.quality.this_step)
-            recorder.step(
-                t,
-                step,
-                actual,
-                true_height,
-                cmd_state.phase,
-                cmd.armed,
-                cmd.setpoint,
-                ge,
-                speeds,
-                output,
-                flight_mode=cmd_state.mode.value,
-            )
-            for text in nav.events:  # after the step: the recording opens with the mode
-                on_event(t, text)
-            nav.events.clear()
-            zd = cmd.setpoint.position_m[2] if cmd.setpoint is not None else math.nan
-            p, v = actual.position_m, actual.velocity_m_s
-            rows.append(
-                (
-                    t,
-                    p[0],
-                    p[1],
-                    p[2],
-                    v[0],
-                    v[1],
-                    v[2],
-                    zd,
-                    true_height,
-                    MODES.index(cmd_state.phase),
-                )
-            )
-            # what the ground stations asked since, and the failsafes: for the next step (a
-            # real autopilot's commander runs beside its control loop, not in it)
-            cmd_state = station.before_step(cmd_state, inp)
-            if (
-                config.exit_after_landing
-                and cmd_state.phase == Phase.LANDED
-                and t - (cmd_state.touchdown_s or t) >= config.settle_after_landing_s
-            ):
-                break
-            if t >= config.max_flight_s:
-                ended = "mission time limit"
-                break
-            if config.should_stop():
-                ended = "stopped"
-                break
+        while ended is None:
+            ended = _step(p, s)
     except LinkLost as lost:
         ended = str(lost)
     finally:
         # the loop's time: stopping the learner and closing links and files is not flying
         wall = time.perf_counter() - wall0
-        link.close()
-        online_summary = online.close()
-        station.save_signing(time.monotonic())
-        gcs.close()
+        p.link.close()
+        online_summary = p.online.close()
+        p.station.save_signing(time.monotonic())
+        p.gcs.close()
         if sys.exc_info()[0] is not None:  # an exception on its way out ended the flight
-            recorder.close("interrupted")
+            p.recorder.close("interrupted")
+    assert ended is not None
     summary: dict[str, Any] = {"ended": ended, "landed": ended == "landed"}
     try:
-        log = np.asarray(rows, dtype=float).reshape(-1, len(COLUMNS))
-        if len(log):
-            summary.update(flight_metrics(log, MODES, landing_target_xy(cmd_state), resting_height))
-            sim_s = float(log[-1, 0] - log[0, 0])
-            summary.update(
-                sim_s=sim_s,
-                wall_s=wall,
-                rtf=sim_s / wall if wall > 0 else 0.0,
-                steps=len(log),
-                trajectory_sha256=trajectory_sha256(log),
-            )
-        summary.update(estimator_metrics(np.asarray(nav_errors).reshape(-1, 7), nav))
-        summary.update(ge_error_metrics(np.asarray(ge_pairs, dtype=float).reshape(-1, 3)))
-        if timings:
-            us = np.asarray(timings) * 1e6
-            summary.update(
-                controller_us_p50=float(np.percentile(us, 50)),
-                controller_us_p99=float(np.percentile(us, 99)),
-            )
-            us = np.asarray(step_timings) * 1e6
-            summary.update(
-                estimator_controller_us_p50=float(np.percentile(us, 50)),
-                estimator_controller_us_p99=float(np.percentile(us, 99)),
-            )
-        if correction_timings:
-            us = np.asarray(correction_timings) * 1e6
-            summary.update(
-                estimator_correction_us_p50=float(np.percentile(us, 50)),
-                estimator_correction_us_p99=float(np.percentile(us, 99)),
-            )
-        summary.update(
-            model=tuning.model.name,
-            malformed=link.malformed,
-            unknown=link.unknown,
-            gcs=gcs.counters.as_dict(),
-            mission_items=len(station.items),
-            touchdown_declared_s=cmd_state.touchdown_s,
-            failsafes=failsafes,
-            **online_summary,
-        )
+        log, summary = _summary(p, s, ended, wall, online_summary)
     finally:
-        recorder.close(ended, summary)  # the summary in the file too (a no-op if closed)
-    summary.update(recorder.stats())
-    data = np.asarray(samples, dtype=float) if samples else None
+        p.recorder.close(ended, summary)  # the summary in the file too (a no-op if closed)
+    summary.update(p.recorder.stats())
+    data = np.asarray(trace.samples, dtype=float) if trace.samples else None
     return Flight(log=log, summary=summary, ended=ended, samples=data)

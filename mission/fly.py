@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -12,12 +13,13 @@ from pathlib import Path
 from typing import Any
 
 from autopilot.commander.mission_items import Home
+from autopilot.request import NO_PARAMS_FILE, FlightRequest
 from mission.gcs_client import GroundStation, GroundStationError, VehicleEnded
 from mission.plans.formats import load_mission_file
 from mission.recordings import default_recording_path
 from simbridge.config import ConfigError
-from simbridge.launch import finish, spawn_local_sim, vehicle_options
-from simbridge.world import load_world, resolve_world_path
+from simbridge.launch import finish, spawn_local_sim
+from simbridge.world import World, load_world, resolve_world_path
 
 
 def default_rho(world_name: str) -> float:
@@ -26,84 +28,111 @@ def default_rho(world_name: str) -> float:
     return ge.rho if ge is not None else 1.0
 
 
-def _autopilot(sim: int | str, *options: str) -> list[str]:
-    """An autopilot process against a local simulator (a TCP port on this machine or a URL),
-    starting from default parameters."""
+def request_command(request: FlightRequest) -> list[str]:
+    """The command line of an autopilot process flying `request`."""
+    return [sys.executable, "-m", "mission.cli", "autopilot", *request.argv()]
+
+
+def local_request(sim: int | str, options: Sequence[str] = ()) -> FlightRequest:
+    """A request to a local simulator (a TCP port on this machine or a URL), starting from
+    default parameters, with `options` as `groundfx autopilot` takes them."""
     url = f"tcp:127.0.0.1:{sim}" if isinstance(sim, int) else sim
-    return [
-        *(sys.executable, "-m", "mission.cli", "autopilot"),
-        *("--sim", url, "--params-file", "none"),
-        *options,
-    ]
+    base = FlightRequest(sim=url, params_file=Path(NO_PARAMS_FILE))
+    return base.with_options(options)
 
 
 def autopilot_command(sim: int | str, mission_path: Path, *options: str) -> list[str]:
     """The command line of an autopilot process flying `mission_path` against a local sim on
     its own, with no ground station (reproducible: arming and take-off at fixed sim times)."""
-    return _autopilot(sim, "--mission", str(mission_path), "--auto-start", "--no-gcs", *options)
+    request = local_request(sim, options)
+    return request_command(
+        dataclasses.replace(request, mission=mission_path, auto_start=True, no_gcs=True)
+    )
 
 
 def gcs_autopilot_command(sim: int | str, gcs_port: int, *options: str) -> list[str]:
     """An autopilot process that waits for a ground station on udpout:127.0.0.1:`gcs_port`."""
-    return _autopilot(
-        sim, "--out", f"udpout:127.0.0.1:{gcs_port}", "--exit-after-landing", *options
+    request = local_request(sim, options)
+    out = (f"udpout:127.0.0.1:{gcs_port}", *request.out)
+    return request_command(dataclasses.replace(request, out=out, exit_after_landing=True))
+
+
+def _flight_request(
+    mission_path: Path,
+    world: str,
+    world_obj: World,
+    model: str,
+    via_gcs: bool,
+    record: bool | Path,
+    autopilot_options: Sequence[str],
+    asked: dict[str, Any],
+) -> FlightRequest:
+    """What `fly` asks of its autopilot process: the world's origin and vehicle, the model
+    (rho by default the world's), the recording, and what the caller asked."""
+    o = world_obj.origin
+    given = {name: value for name, value in asked.items() if value is not None}
+    request = FlightRequest(**given).with_options(autopilot_options)
+    rho = default_rho(world) if request.rho is None else request.rho
+    origin = f"{o.lat_deg},{o.lon_deg},{o.alt_m}"
+    request = dataclasses.replace(
+        request, model=model, rho=rho, json=True, origin=origin, params_file=Path(NO_PARAMS_FILE)
     )
+    if "--vehicle" not in autopilot_options and "vehicle" not in asked:
+        # the simulator's vehicle: with the nano's mass, C_T and rotor speeds a Crazyflie's
+        # world never finished its mission
+        request = dataclasses.replace(request, vehicle=world_obj.vehicle)
+    if record is False:
+        request = dataclasses.replace(request, no_record=True)
+    else:
+        path = default_recording_path(mission_path, model) if record is True else record
+        request = dataclasses.replace(
+            request,
+            record=Path(path),
+            record_world=str(resolve_world_path(world)),
+            record_mission=str(mission_path),
+        )
+    if via_gcs:
+        return dataclasses.replace(request, exit_after_landing=True)
+    return dataclasses.replace(request, mission=mission_path, auto_start=True, no_gcs=True)
 
 
 def fly(
     mission_path: Path,
     world: str = "default",
     model: str = "analytic",
-    rho: float | None = None,
+    *,
+    via_gcs: bool = True,
     speedup: str = "max",
     start: str | None = None,
-    trajectory: Path | None = None,
-    network: str | Path | None = None,
-    via_gcs: bool = True,
-    identity: str = "px4",
-    say: Callable[[str], None] = lambda text: None,
-    flight_log: Path | None = None,
     record: bool | Path = True,
-    max_flight_s: float | None = None,
-    autopilot_options: Sequence[str] = (),
+    say: Callable[[str], None] = lambda text: None,
     sim_options: Sequence[str] = (),
+    autopilot_options: Sequence[str] = (),
+    **asked: Any,
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line.
 
-    `via_gcs`: a ground station on pymavlink uploads the mission, arms, starts it and waits
-    for the disarm, as a user's would. Otherwise the autopilot loads the mission and arms by
-    itself at a fixed simulated time, so that the same flight gives the same trajectory.
-    `record`: True records to a new file in the logs folder, a path records there, False not
-    at all.
+    `asked`: fields of the autopilot's `FlightRequest` (rho, network, trajectory,
+    flight_log, max_flight_s, identity, param, online, ...); `autopilot_options`: the same
+    as `groundfx autopilot` options, set over them. `via_gcs`: a ground station on pymavlink
+    uploads the mission, arms, starts it and waits for the disarm, as a user's would.
+    Otherwise the autopilot loads the mission and arms by itself at a fixed simulated time,
+    so that the same flight gives the same trajectory. `record`: True records to a new file
+    in the logs folder, a path records there, False not at all.
     """
-    world_obj = load_world(world)  # refuse a bad world or mission before starting anything
+    # refuse a bad world, request or mission before starting anything
+    world_obj = load_world(world)
+    request = _flight_request(
+        mission_path, world, world_obj, model, via_gcs, record, autopilot_options, asked
+    )
     o = world_obj.origin
     doc = load_mission_file(mission_path, Home(o.lat_deg, o.lon_deg, o.alt_m))
-    rho = default_rho(world) if rho is None else rho
-    options = ["--model", model, "--rho", str(rho), "--json", "--identity", identity]
-    options += ["--origin", f"{o.lat_deg},{o.lon_deg},{o.alt_m}"]
-    if trajectory is not None:
-        options += ["--trajectory", str(trajectory)]
-    if network is not None:
-        options += ["--network", str(network)]
-    if flight_log is not None:
-        options += ["--flight-log", str(flight_log)]
-    if max_flight_s is not None:
-        options += ["--max-flight-s", str(max_flight_s)]
-    if record is False:
-        options += ["--no-record"]
-    else:
-        path = default_recording_path(mission_path, model) if record is True else record
-        options += ["--record", str(path), "--record-world", str(resolve_world_path(world))]
-        options += ["--record-mission", str(mission_path)]
-    options += vehicle_options(world_obj.vehicle, autopilot_options)
-    options += autopilot_options  # e.g. the experiments' --online METHOD
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
     # both ends are ours: a Unix-domain socket, and the two processes start side by side
     socket_dir = tempfile.TemporaryDirectory(prefix="groundfx-")
     socket_path = Path(socket_dir.name) / "sim.sock"
-    sim_url = f"unix:{socket_path}"
+    request = dataclasses.replace(request, sim=f"unix:{socket_path}")
     sim = spawn_local_sim(
         resolve_world_path(world),
         socket_path,
@@ -114,14 +143,17 @@ def fly(
     gcs: dict[str, Any] = {}
     try:
         if station is None:
-            cmd = autopilot_command(sim_url, mission_path, *options)
-            autopilot = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
+            autopilot = subprocess.run(
+                request_command(request), capture_output=True, text=True, timeout=1800
+            )
             out, err, code = autopilot.stdout, autopilot.stderr, autopilot.returncode
         else:
             gcs_port = station.conn.port.getsockname()[1]
             station.on_text = lambda text: say(f"vehicle: {text}")
+            out = (f"udpout:127.0.0.1:{gcs_port}", *request.out)
+            request = dataclasses.replace(request, out=out)
             process = subprocess.Popen(
-                gcs_autopilot_command(sim_url, gcs_port, *options),
+                request_command(request),
                 stdout=subprocess.PIPE,
                 stderr=subprocess.PIPE,
                 text=True,
@@ -147,7 +179,7 @@ def fly(
     summary = json.loads(lines[-1])
     summary.update(
         world=str(resolve_world_path(world)),
-        rho=rho,
+        rho=request.rho,
         simulator=sim_line,
         total_wall_s=time.perf_counter() - wall0,
         ground_station=gcs,

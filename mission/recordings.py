@@ -34,29 +34,6 @@ def default_recording_path(mission: Path, model: str, logs: Path | None = None) 
     return path
 
 
-def add_record_options(p: argparse.ArgumentParser, world: bool = False) -> None:
-    g = p.add_mutually_exclusive_group()
-    g.add_argument(
-        "--record",
-        type=Path,
-        metavar="PATH",
-        help="write the flight's rerun recording here (default: logs/<time>-<mission>-<model>.rrd)",
-    )
-    g.add_argument("--no-record", action="store_true", help="do not record the flight")
-    if world:
-        p.add_argument(
-            "--record-world",
-            metavar="WORLD",
-            help="world YAML or packaged name drawn in the recording (ground and obstacles); "
-            "default: flat ground",
-        )
-        p.add_argument(
-            "--record-mission",
-            metavar="FILE",
-            help="the mission file a ground station uploads, named in the recording's meta",
-        )
-
-
 def record_path(args: argparse.Namespace, model: str) -> Path | None:
     """The recording file the options ask for (None: off); its folder made, or a message.
     Without a mission on the command line (one a ground station uploads) it is named `gcs`."""

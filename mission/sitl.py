@@ -4,9 +4,9 @@ either process does."""
 
 from __future__ import annotations
 
+import dataclasses
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
@@ -14,8 +14,10 @@ from pathlib import Path
 
 import yaml
 
+from autopilot.request import FlightRequest
+from mission.fly import request_command
 from simbridge.config import ConfigError
-from simbridge.launch import start_sim, supervised_options, vehicle_options
+from simbridge.launch import start_sim, supervised_options
 from simbridge.world import load_world, resolve_world_path
 
 STOP_WAIT_S = 5.0  # for each process to end on its signal before it is killed
@@ -59,35 +61,34 @@ def located_world(world: str, location: tuple[float, float, float, float], folde
 def run_sitl(
     world: str,
     speedup: str,
-    autopilot_options: list[str],
-    gcs_urls: list[str],
+    request: FlightRequest,
+    vehicle: str | None,
     location: tuple[float, float, float, float] | None,
     say: Callable[[str], None] = print,
     sim_options: Sequence[str] = (),
 ) -> int:
+    """The simulator and an autopilot process flying `request` against it, with the world's
+    origin and (unless `vehicle` names one) its vehicle."""
     with tempfile.TemporaryDirectory(prefix="groundfx-sitl-") as tmp:
         world_path = (
             located_world(world, location, Path(tmp)) if location else resolve_world_path(world)
         )
         world_obj = load_world(world_path)
         o = world_obj.origin
-        vehicle = vehicle_options(world_obj.vehicle, autopilot_options)
         sim, port = start_sim(
             world_path, speedup=speedup, extra=["--wait", *sim_options], supervised=True
         )
-        cmd = [
-            sys.executable, "-m", "mission.cli", "autopilot",
-            "--sim", f"tcp:127.0.0.1:{port}",
-            "--origin", f"{o.lat_deg},{o.lon_deg},{o.alt_m}",
-            *[a for url in gcs_urls for a in ("--out", url)],
-            "--record-world", str(world_path),  # ignored when not recording
-            *vehicle,
-            *autopilot_options,
-        ]  # fmt: skip
-        autopilot = subprocess.Popen(cmd, **supervised_options())
+        request = dataclasses.replace(
+            request,
+            sim=f"tcp:127.0.0.1:{port}",
+            origin=f"{o.lat_deg},{o.lon_deg},{o.alt_m}",
+            record_world=str(world_path),  # ignored when not recording
+            vehicle=vehicle or world_obj.vehicle,
+        )
+        autopilot = subprocess.Popen(request_command(request), **supervised_options())
         say(f"groundfx sitl: simulator on tcp:127.0.0.1:{port} ({world_path}, speed {speedup})")
         say(f"groundfx sitl: vehicle 1 at {o.lat_deg:.7f}, {o.lon_deg:.7f}, {o.alt_m:g} m")
-        for url in gcs_urls:
+        for url in request.out:
             say(f"groundfx sitl: ground stations: {connect_hint(url)}")
         say("groundfx sitl: Ctrl-C to stop")
         stop: list[int] = []

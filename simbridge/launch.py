@@ -6,7 +6,6 @@ import ctypes
 import signal
 import subprocess
 import sys
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -105,10 +104,3 @@ def _terminate_with_parent() -> None:
     if sys.platform.startswith("linux"):
         pr_set_pdeathsig = 1
         ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGTERM))
-
-
-def vehicle_options(world_vehicle: str, autopilot_options: Sequence[str]) -> list[str]:
-    """`--vehicle` for an autopilot started beside a simulator of a world whose `vehicle:` is
-    `world_vehicle`: it flies the simulator's vehicle unless its options name one (with the
-    nano's mass, C_T and rotor speeds a Crazyflie's world never finished its mission)."""
-    return [] if "--vehicle" in autopilot_options else ["--vehicle", world_vehicle]

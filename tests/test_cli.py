@@ -73,3 +73,30 @@ def test_fly_writes_a_flight_log_and_ends_at_its_time_limit(tmp_path):
     header, *rows = [ln for ln in log.read_text().splitlines() if not ln.startswith("#")]
     assert header.startswith("time_s,x_m,y_m,z_m") and len(rows) > 100  # airborne steps
     assert float(rows[-1].split(",")[0]) <= 3.0
+
+
+def test_a_flight_request_crosses_to_the_autopilot_as_its_own_command_line():
+    """What `fly` and `sitl` ask of the autopilot process reads back as the same request:
+    repeatable options in order, a southern origin's leading minus, the tri-state online
+    mode; options left at their defaults are not written at all."""
+    from pathlib import Path
+
+    from autopilot.request import FlightRequest
+
+    request = FlightRequest(
+        sim="unix:/tmp/sim.sock",
+        mission=Path("mission/examples/hover.yaml"),
+        auto_start=True,
+        model="neural",
+        rho=2.0,
+        out=("udpout:127.0.0.1:14550", "tcpin:0.0.0.0:5760"),
+        param=("GFX_OL_LR=0.01", "MIS_TAKEOFF_ALT=-2"),
+        origin="-33.8568,151.2153,10",
+        online="rls",
+        online_deterministic=False,
+        max_flight_s=12.5,
+    )
+    assert FlightRequest.parse(request.argv()) == request
+    assert FlightRequest().argv() == [] and FlightRequest.parse([]) == FlightRequest()
+    more = request.with_options(["--param", "GFX_POS_I=0", "--rho", "1"])
+    assert more.param == (*request.param, "GFX_POS_I=0") and more.rho == 1.0

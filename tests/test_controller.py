@@ -10,8 +10,10 @@ from autopilot.control.controller import (
     ControllerParams,
     control,
     handover,
+    integral_frozen,
     integrate,
     jerk_limited,
+    model_handover,
 )
 from autopilot.control.ground_models import (
     AnalyticGroundEffect,
@@ -196,6 +198,27 @@ def test_a_new_model_takes_over_what_the_integral_held_and_no_more():
     assert handover((0.01, 0.0, -0.03), (0.02, 0.0, -0.01)) == (0.01, 0.0, -0.03)
 
 
+def test_a_replaced_model_hands_over_its_new_prediction_per_mass():
+    """A model that now predicts 1 mN more lift than the old one at the same state takes
+    1 mN / m of what the integral held."""
+    m = V.mass_kg
+    after = model_handover((0.0, 0.0, -0.03), (0.0, 0.0, 0.002), (0.0, 0.0, 0.001), m)
+    assert after == pytest.approx((0.0, 0.0, -0.03 + 0.001 / m))
+
+
+def test_the_integral_holds_on_the_ground_in_contact_or_saturated_and_runs_in_the_air():
+    rest = 0.0126
+
+    def frozen(air=True, takeoff=False, height=0.5, contact=False, saturated=False):
+        return integral_frozen(air, takeoff, height, rest, contact, saturated)
+
+    assert not frozen()  # flying: it runs
+    assert frozen(air=False)  # disarmed, landed: it holds
+    assert frozen(height=rest + 0.001)  # on the ground while flying or landing
+    assert not frozen(takeoff=True, height=rest)  # a heavy vehicle winds it up to leave
+    assert frozen(contact=True) and frozen(saturated=True)
+
+
 def test_the_jerk_limit_moves_a_vector_towards_the_wanted_one_at_most_jerk_times_dt():
     gains = ControllerParams(max_jerk_m_s3=20.0)
     assert jerk_limited((0.0, 0.0), (0.01, 0.0), 0.004, gains) == (0.01, 0.0)  # within reach
@@ -226,3 +249,16 @@ def test_a_jumping_setpoint_tilts_the_vehicle_at_the_jerk_limit_and_not_at_once(
     )
     assert out.pd_acceleration_m_s2[0] == pytest.approx(-gains.position_d)  # velocity term whole
     assert out.pd_acceleration_m_s2[2] == pytest.approx(0.0)
+
+
+def test_landing_contact_needs_a_landing_setpoint_below_and_a_low_thrust_demand():
+    from autopilot.control.land_detector import LandDetectorParams, landing_contact
+
+    params, rest = LandDetectorParams(), 0.0126
+    # landing, 3 cm up, still, the setpoint 2 cm below and the controller pushing down
+    assert landing_contact(rest + 0.03, rest, 0.0, 0.05, 0.03, -0.5, params)
+    assert not landing_contact(rest + 0.03, rest, 0.0, 0.05, None, -0.5, params)  # not landing
+    assert not landing_contact(rest + 0.03, rest, 0.0, 0.05, 0.03, 0.0, params)  # full lift
+    assert not landing_contact(rest + 0.03, rest, 0.2, 0.05, 0.03, -0.5, params)  # descending
+    # rotors off (no command): no lift demanded at all
+    assert landing_contact(rest, rest, 0.0, 0.05, 0.03, None, params)

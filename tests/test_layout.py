@@ -73,6 +73,7 @@ AUTOPILOT_LEVELS = (
     {"commander"},  # phases, modes, requests, failsafes, mission items
     {"params"},  # the parameters of every room, tuned over MAVLink
     {"gcs", "recording", "online", "nav_metrics", "truth"},  # the loop's companions
+    {"summary", "tuning", "request", "flight_config"},  # the request; settings; figures
     {"runner"},  # thin wiring: link -> estimate -> command -> control -> send
 )
 
@@ -93,3 +94,33 @@ def test_autopilot_rooms_import_down_their_levels() -> None:
         if _room(m) and _room(d) and level[_room(d)] > level[_room(m)]
     ]
     assert upward == []
+
+
+MAX_MODULE_LINES = 500  # a module longer than this holds more than one concern
+MAX_FUNCTION_LINES = 80  # a function longer than this holds more than one step
+SIZED_PACKAGES = ("autopilot", "simbridge")
+
+
+def _sized_files() -> list[Path]:
+    return sorted(p for pkg in SIZED_PACKAGES for p in (ROOT / pkg).rglob("*.py"))
+
+
+def test_no_module_is_over_its_size() -> None:
+    long = [
+        f"{p.relative_to(ROOT)}: {n} lines"
+        for p in _sized_files()
+        if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES
+    ]
+    assert long == []
+
+
+def test_no_function_is_over_its_size() -> None:
+    long = []
+    for p in _sized_files():
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                assert node.end_lineno is not None
+                lines = node.end_lineno - node.lineno + 1
+                if lines > MAX_FUNCTION_LINES:
+                    long.append(f"{p.relative_to(ROOT)}:{node.lineno} {node.name}: {lines} lines")
+    assert long == []

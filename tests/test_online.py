@@ -418,3 +418,19 @@ def test_a_protecting_method_adapts_to_rho2_and_forgets_less_than_naive(tmp_path
     assert near["naive"] < offline_near and near["replay"] < offline_near, (offline_near, near)
     assert offline_far < 0.002, offline_far  # the offline network knows the far field
     assert far["replay"] < 0.5 * far["naive"], far
+
+
+def test_samples_are_taken_on_a_fixed_grid_in_the_air_only():
+    """100 Hz on 250 Hz steps: 100 samples a second, none on the ground; after a pause the
+    grid starts again from the first sample."""
+    from autopilot.online.sample_schedule import SampleSchedule
+
+    schedule, taken = SampleSchedule(), 0
+    for k in range(250):
+        t = k * 0.004
+        if schedule.due(t, 100.0, in_the_air=True):
+            schedule, taken = schedule.after_sample(t, 100.0), taken + 1
+    assert taken == 100
+    assert not schedule.due(5.0, 100.0, in_the_air=False)
+    assert not schedule.due(5.0, 0.0, in_the_air=True)  # sampling off
+    assert schedule.after_sample(5.0, 100.0).next_s == pytest.approx(5.01)

@@ -149,6 +149,33 @@ def integrate(
     )
 
 
+# The integral runs only this far above the resting height: on the ground the contact force
+# would wind it up.
+INTEGRATE_ABOVE_M = 0.005
+
+
+def integral_frozen(
+    in_the_air: bool,
+    taking_off: bool,
+    height_m: float,
+    resting_height_m: float,
+    contact: bool,
+    saturated: bool,
+) -> bool:
+    """Anti-windup: whether the integral holds still this step. `in_the_air`: the commander
+    flies (taking off, flying, holding, landing). It holds on the ground (but while taking
+    off: a vehicle heavier than its file must wind the integral up to leave it), in ground
+    contact, or when the last command saturated. While landing it runs: a vehicle held up by
+    a force its model lacks must wind it down to come down (PX4's integrators run until
+    ground contact)."""
+    return (
+        not in_the_air
+        or (not taking_off and height_m < resting_height_m + INTEGRATE_ABOVE_M)
+        or contact
+        or saturated
+    )
+
+
 def handover(integral_m_s2: Vec3, change_m_s2: Vec3) -> Vec3:
     """The integral after the ground-effect model changed by `change_m_s2` (its new minus its
     old prediction at the current state, over the mass): the model takes over the part of
@@ -169,6 +196,16 @@ def handover(integral_m_s2: Vec3, change_m_s2: Vec3) -> Vec3:
     )
 
 
+def model_handover(
+    integral_m_s2: Vec3, new_prediction_n: Vec3, old_prediction_n: Vec3, mass_kg: float
+) -> Vec3:
+    """The integral after the ground-effect model was replaced, from the new and the old
+    model's predictions at the current state (bumpless transfer, see `handover`)."""
+    new, old, m = new_prediction_n, old_prediction_n, mass_kg
+    change = ((new[0] - old[0]) / m, (new[1] - old[1]) / m, (new[2] - old[2]) / m)
+    return handover(integral_m_s2, change)
+
+
 def jerk_limited(
     previous_m_s2: tuple[float, float],
     wanted_m_s2: tuple[float, float],
@@ -186,26 +223,18 @@ def jerk_limited(
     return (previous_m_s2[0] + du * most / step, previous_m_s2[1] + dv * most / step)
 
 
-def control(
+def _commanded_acceleration(
     state: FlightState,
     setpoint: Setpoint,
-    ground_effect_n: Vec3,
-    vehicle: Vehicle,
     params: ControllerParams,
-    integral_m_s2: Vec3 = (0.0, 0.0, 0.0),
-    previous_position_term_m_s2: tuple[float, float] | None = None,
-    dt_s: float = 0.0,
-) -> ControlOutput:
-    """One step. `previous_position_term_m_s2`: the last step's `position_term_m_s2` (None:
-    none, as on the ground), `dt_s` before this one. The horizontal position term then
-    changes by at most `max_jerk_m_s3` times `dt_s`: a setpoint that jumps (a new waypoint,
-    the carrot turning a corner) tilts the vehicle over a few tenths of a second instead of
-    in one step, as PX4's jerk-limited setpoints do. The velocity term is not limited: it
-    moves with the vehicle, and state noise passes through it unfiltered, as before."""
-    m, g = vehicle.mass_kg, GRAVITY_M_S2
+    integral_m_s2: Vec3,
+    previous_position_term_m_s2: tuple[float, float] | None,
+    dt_s: float,
+) -> tuple[tuple[float, float], Vec3, Vec3]:
+    """Equation 3.7 in the world frame: (the jerk-limited horizontal position term, the PD
+    term, the commanded acceleration with the feed-forward and the integral term)."""
     p, v, sp, i = state.position_m, state.velocity_m_s, setpoint, integral_m_s2
     a0, a1 = params.position_p, params.position_d
-    # (3.7), world frame: the PD term, then the feed-forward and the integral term
     e_xy = (a0 * (sp.position_m[0] - p[0]), a0 * (sp.position_m[1] - p[1]))
     if previous_position_term_m_s2 is not None:
         e_xy = jerk_limited(previous_position_term_m_s2, e_xy, dt_s, params)
@@ -219,15 +248,36 @@ def control(
         min(max(pd_z, -z_limit), z_limit),
     )
     ff = sp.acceleration_m_s2
-    ax, ay, az = pd[0] + ff[0] + i[0], pd[1] + ff[1] + i[1], pd[2] + ff[2] + i[2]
+    commanded = (pd[0] + ff[0] + i[0], pd[1] + ff[1] + i[1], pd[2] + ff[2] + i[2])
+    return e_xy, pd, commanded
 
-    phi, theta, psi = euler_from_quat(state.quaternion)
+
+@dataclass(frozen=True)
+class _Attitude:
+    """Thrust and the desired roll and pitch (3.11-3.13), and whether a limit cut them."""
+
+    thrust_n: float
+    roll_rad: float
+    pitch_rad: float
+    saturated: bool
+
+
+def _thrust_and_tilt(
+    commanded_m_s2: Vec3,
+    ground_effect_n: Vec3,
+    euler_rad: Vec3,
+    vehicle: Vehicle,
+    params: ControllerParams,
+) -> _Attitude:
+    """(3.11) with the current tilt; (3.12, 3.13) the tilt that gives the commanded
+    acceleration, in the frame turned by the yaw."""
+    m, g = vehicle.mass_kg, GRAVITY_M_S2
+    ax, ay, az = commanded_m_s2
+    phi, theta, psi = euler_rad
     c, s = math.cos(psi), math.sin(psi)
     a_u, a_v = c * ax + s * ay, -s * ax + c * ay
     fx, fy, fz = ground_effect_n
     f_u, f_v = c * fx + s * fy, -s * fx + c * fy
-
-    # (3.11) with the current tilt; (3.12, 3.13) the tilt that gives the commanded acceleration
     vertical = max(az + g - fz / m, MIN_VERTICAL_ACCEL_M_S2)
     tilt_cos = max(math.cos(phi) * math.cos(theta), 0.5)
     thrust_max = 4.0 * vehicle.thrust_coefficient_n_s2 * vehicle.max_rotor_speed_rad_s**2
@@ -244,8 +294,21 @@ def control(
         or phi_dc != phi_want
         or az + g - fz / m < MIN_VERTICAL_ACCEL_M_S2
     )
+    return _Attitude(thrust, phi_dc, theta_dc, saturated)
 
-    # (3.14) Euler-angle accelerations; Euler rates from body rates: eta' = W w
+
+def _moments(
+    state: FlightState,
+    euler_rad: Vec3,
+    desired_rad: Vec3,
+    vehicle: Vehicle,
+    params: ControllerParams,
+) -> Vec3:
+    """(3.14) the Euler-angle accelerations towards `desired_rad` (roll, pitch, yaw), (3.15)
+    the body's angular acceleration that gives them, and the moment: M = I w' + w x I w."""
+    phi, theta, psi = euler_rad
+    phi_dc, theta_dc, yaw_rad = desired_rad
+    # Euler rates from body rates: eta' = W w
     wx, wy, wz = state.angular_velocity_body_rad_s
     sphi, cphi = math.sin(phi), math.cos(phi)
     cth = math.cos(theta)
@@ -257,7 +320,7 @@ def control(
     kp, kd = params.attitude_p, params.attitude_d
     phi_dd = kp * (phi_dc - phi) - kd * phi_dot
     theta_dd = kp * (theta_dc - theta) - kd * theta_dot
-    psi_dd = params.yaw_p * _wrap(sp.yaw_rad - psi) - params.yaw_d * psi_dot
+    psi_dd = params.yaw_p * _wrap(yaw_rad - psi) - params.yaw_d * psi_dot
 
     # (3.15) w' = W^-1 (eta'' - W' w)
     sec2 = 1.0 / (cth * cth)
@@ -276,15 +339,39 @@ def control(
     dwy = cphi * r_theta + sphi * cth * r_psi
     dwz = -sphi * r_theta + cphi * cth * r_psi
     ixx, iyy, izz = vehicle.inertia_kg_m2
-    moments = (
+    return (
         ixx * dwx + (izz - iyy) * wy * wz,
         iyy * dwy + (ixx - izz) * wz * wx,
         izz * dwz + (iyy - ixx) * wx * wy,
     )
 
+
+def control(
+    state: FlightState,
+    setpoint: Setpoint,
+    ground_effect_n: Vec3,
+    vehicle: Vehicle,
+    params: ControllerParams,
+    integral_m_s2: Vec3 = (0.0, 0.0, 0.0),
+    previous_position_term_m_s2: tuple[float, float] | None = None,
+    dt_s: float = 0.0,
+) -> ControlOutput:
+    """One step. `previous_position_term_m_s2`: the last step's `position_term_m_s2` (None:
+    none, as on the ground), `dt_s` before this one. The horizontal position term then
+    changes by at most `max_jerk_m_s3` times `dt_s`: a setpoint that jumps (a new waypoint,
+    the carrot turning a corner) tilts the vehicle over a few tenths of a second instead of
+    in one step, as PX4's jerk-limited setpoints do. The velocity term is not limited: it
+    moves with the vehicle, and state noise passes through it unfiltered."""
+    e_xy, pd, commanded = _commanded_acceleration(
+        state, setpoint, params, integral_m_s2, previous_position_term_m_s2, dt_s
+    )
+    euler = euler_from_quat(state.quaternion)
+    attitude = _thrust_and_tilt(commanded, ground_effect_n, euler, vehicle, params)
+    desired = (attitude.roll_rad, attitude.pitch_rad, setpoint.yaw_rad)
+    moments = _moments(state, euler, desired, vehicle, params)
     n_max = vehicle.max_rotor_speed_rad_s
     forces = prioritised_rotor_forces(
-        thrust,
+        attitude.thrust_n,
         moments,
         vehicle.arm_m,
         vehicle.yaw_moment_coefficient_m,
@@ -295,12 +382,12 @@ def control(
     )
     return ControlOutput(
         rotor_speeds_rad_s=speeds,
-        thrust_n=thrust,
+        thrust_n=attitude.thrust_n,
         moments_n_m=moments,
-        commanded_acceleration_m_s2=(ax, ay, az),
-        desired_roll_rad=phi_dc,
-        desired_pitch_rad=theta_dc,
-        saturated=saturated,
+        commanded_acceleration_m_s2=commanded,
+        desired_roll_rad=attitude.roll_rad,
+        desired_pitch_rad=attitude.pitch_rad,
+        saturated=attitude.saturated,
         pd_acceleration_m_s2=pd,
         position_term_m_s2=e_xy,
     )

@@ -14,6 +14,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from simbridge.config import param
+from simbridge.vehicle import GRAVITY_M_S2
+
+# Above the resting height by more than this, the vehicle is in the air: samples of
+# equation 3.16 are taken there only, since on the ground the contact force would pass for
+# ground effect.
+AIRBORNE_MARGIN_M = 0.002
 
 
 @dataclass(frozen=True)
@@ -59,6 +65,34 @@ def ground_contact(
         and abs(vertical_speed_m_s) <= params.max_climb_rate_m_s
         and setpoint_below_m >= params.min_setpoint_below_m
         and thrust_fraction <= params.low_thrust
+    )
+
+
+def airborne(height_m: float, resting_height_m: float) -> bool:
+    """The vehicle is off the ground (by `AIRBORNE_MARGIN_M`)."""
+    return height_m > resting_height_m + AIRBORNE_MARGIN_M
+
+
+def landing_contact(
+    height_m: float,
+    resting_height_m: float,
+    vertical_speed_m_s: float,
+    position_z_m: float,
+    landing_setpoint_z_m: float | None,
+    commanded_vertical_m_s2: float | None,
+    params: LandDetectorParams,
+) -> bool:
+    """`ground_contact` from what the loop knows: `landing_setpoint_z_m`, the last setpoint's
+    height while landing (None: not landing, so nothing is asked below);
+    `commanded_vertical_m_s2`, the controller's last vertical acceleration (None: it did
+    not run, rotors off). The lift it demands of rotors and ground effect together, over
+    the weight: below 1 it pushes down, and a vehicle that does not follow is held up."""
+    below = position_z_m - landing_setpoint_z_m if landing_setpoint_z_m is not None else 0.0
+    thrust_fraction = (
+        1.0 + commanded_vertical_m_s2 / GRAVITY_M_S2 if commanded_vertical_m_s2 is not None else 0.0
+    )
+    return ground_contact(
+        height_m, resting_height_m, vertical_speed_m_s, below, thrust_fraction, params
     )
 
 

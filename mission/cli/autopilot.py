@@ -10,9 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from mission.cli.online import add_online_options
-from mission.cli.options import DEFAULT_GCS_URLS, gcs_options, max_flight_s, model_options
-from mission.recordings import add_record_options
+from autopilot.request import DEFAULT_GCS_URLS, NO_PARAMS_FILE, FlightRequest, add_options
 from simbridge.config import ConfigError
 
 
@@ -21,35 +19,7 @@ def add_parser(sub: Any) -> None:
         "autopilot",
         help="run the autopilot: PX4 simulator protocol to the sim, MAVLink to ground stations",
     )
-    p.add_argument(
-        "--sim",
-        default="tcp:127.0.0.1:4560",
-        help="simulator URL, tcp:HOST:PORT or unix:PATH (default: tcp:127.0.0.1:4560)",
-    )
-    p.add_argument("--mission", type=Path, help="a mission file to load before any upload")
-    p.add_argument(
-        "--auto-start",
-        action="store_true",
-        help="arm and fly --mission at once, without a ground station (reproducible runs)",
-    )
-    p.add_argument(
-        "--exit-after-landing",
-        action="store_true",
-        help="end (printing the summary) once a flight has landed and disarmed",
-    )
-    model_options(p, rho_default=None, model_default=None)
-    gcs_options(p)
-    p.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
-    p.add_argument("--origin", metavar="LAT,LON,ALT", help="geodetic origin of the local frame")
-    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
-    p.add_argument("--trajectory", type=Path, help="save the flown trajectory (.npz)")
-    p.add_argument("--flight-log", type=Path, help="save airborne steps as a gap-diagnosis log")
-    p.add_argument(
-        "--max-flight-s", type=max_flight_s, default=900.0,
-        help="end the flight (exit code 3) after this many simulated seconds (default 900)",
-    )  # fmt: skip
-    add_online_options(p)
-    add_record_options(p, world=True)
+    add_options(p)
     p.set_defaults(func=cmd_autopilot)
 
 
@@ -65,9 +35,9 @@ def _origin(text: str) -> tuple[float, float, float]:
     return (lat, lon, alt)
 
 
-def _param_overrides(args: argparse.Namespace) -> dict[str, float]:
+def _param_overrides(request: FlightRequest) -> dict[str, float]:
     out: dict[str, float] = {}
-    for text in args.param:
+    for text in request.param:
         name, sep, value = text.partition("=")
         try:
             out[name.strip()] = float(value)
@@ -75,25 +45,24 @@ def _param_overrides(args: argparse.Namespace) -> dict[str, float]:
             raise ConfigError(f"--param {text!r}: expected NAME=NUMBER") from None
         if not sep:
             raise ConfigError(f"--param {text!r}: expected NAME=NUMBER")
-    model = getattr(args, "model", None)
-    if model is not None:
+    if request.model is not None:
         from autopilot.control.ground_models import MODEL_NAMES
 
-        out["GFX_GE_MODEL"] = float(MODEL_NAMES.index(model))
-    if getattr(args, "rho", None) is not None:
-        out["GFX_GE_RHO"] = args.rho
+        out["GFX_GE_MODEL"] = float(MODEL_NAMES.index(request.model))
+    if request.rho is not None:
+        out["GFX_GE_RHO"] = request.rho
     from mission.cli.online import online_overrides
 
-    return out | online_overrides(args)
+    return out | online_overrides(request)
 
 
-def _flight_log_writer(args: argparse.Namespace) -> Any:
-    if args.flight_log is None:
+def _flight_log_writer(request: FlightRequest) -> Any:
+    if request.flight_log is None:
         return None
     from autopilot.recording.flight_log import FlightLogWriter
 
-    mission = str(args.mission.resolve()) if args.mission else None
-    return FlightLogWriter(args.flight_log, {"mission": mission, "vehicle": args.vehicle})
+    mission = str(request.mission.resolve()) if request.mission else None
+    return FlightLogWriter(request.flight_log, {"mission": mission, "vehicle": request.vehicle})
 
 
 def _version() -> str:
@@ -112,110 +81,137 @@ def _sha256(path: str | None) -> str | None:
 
 
 def cmd_autopilot(args: argparse.Namespace) -> int:
-    import dataclasses
+    return run_autopilot(FlightRequest.from_args(args))
 
-    import numpy as np
 
+def _config(request: FlightRequest, should_stop: Any) -> Any:
+    """The runner's configuration for `request`: vehicle, origin, parameters, mission."""
     from autopilot.commander.mission_items import Home
-    from autopilot.control.ground_models import default_network
+    from autopilot.flight_config import AutopilotConfig
     from autopilot.gcs.signing import Signing
-    from autopilot.metrics import COLUMNS
     from autopilot.params import ParamStore
-    from autopilot.recording.record_options import RecordOptions
-    from autopilot.runner import AutopilotConfig, fly_mission
-    from autopilot.simlink import LinkLost, parse_url
+    from autopilot.simlink import parse_url
     from mission.cli.online import online_options
     from mission.plans.formats import load_mission_file
-    from mission.recordings import record_path
     from simbridge.vehicle import load_vehicle
     from simbridge.world import load_world
 
     try:
-        parse_url(args.sim)
+        parse_url(request.sim)
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    if args.auto_start and args.mission is None:
+    if request.auto_start and request.mission is None:
         raise ConfigError("--auto-start: needs --mission")
-    vehicle = load_vehicle(args.vehicle)
-    if args.origin:
-        origin = _origin(args.origin)
+    vehicle = load_vehicle(request.vehicle)
+    if request.origin:
+        origin = _origin(request.origin)
     else:
         o = load_world("default").origin
         origin = (o.lat_deg, o.lon_deg, o.alt_m)
-    overrides = _param_overrides(args)
+    overrides = _param_overrides(request)
     items: tuple = ()
-    if args.mission is not None:
-        doc = load_mission_file(args.mission, Home(*origin))
+    if request.mission is not None:
+        doc = load_mission_file(request.mission, Home(*origin))
         items = doc.items
         if doc.waypoint_timeout_s is not None and "GFX_WP_TIMEOUT" not in overrides:
             overrides["GFX_WP_TIMEOUT"] = doc.waypoint_timeout_s
-    params_file = None if str(args.params_file) == "none" else args.params_file
-    params = ParamStore(params_file, overrides, args.identity)
-    gcs_urls = () if args.no_gcs else tuple(args.out or DEFAULT_GCS_URLS)
-    stop = []
-    config = AutopilotConfig(
-        sim_url=args.sim,
+    params_file = None if str(request.params_file) == NO_PARAMS_FILE else request.params_file
+    params = ParamStore(params_file, overrides, request.identity)
+    gcs_urls = () if request.no_gcs else (request.out or DEFAULT_GCS_URLS)
+    signing = request.signing_key_file
+    return AutopilotConfig(
+        sim_url=request.sim,
         vehicle=vehicle,
         params=params,
         origin=origin,
-        network=args.network,
+        network=request.network,
         mission=items,
-        auto_start=args.auto_start,
-        exit_after_landing=args.exit_after_landing or args.auto_start,
-        identity=args.identity,
+        auto_start=request.auto_start,
+        exit_after_landing=request.exit_after_landing or request.auto_start,
+        identity=request.identity,
         gcs_urls=gcs_urls,
-        signing=Signing(args.signing_key_file) if args.signing_key_file else None,
-        should_stop=lambda: bool(stop),
-        on_step=_flight_log_writer(args),
-        max_flight_s=args.max_flight_s,
-        online=online_options(args, reproducible=args.auto_start),
+        signing=Signing(signing) if signing else None,
+        should_stop=should_stop,
+        on_step=_flight_log_writer(request),
+        max_flight_s=request.max_flight_s,
+        online=online_options(request, reproducible=request.auto_start),
     )
+
+
+def _recording(request: FlightRequest, config: Any) -> tuple[Path | None, Any]:
+    """The recording file (None: off) and the runner's configuration that records there,
+    with what the recording's meta tells of the flight."""
+    import dataclasses
+
+    from autopilot.control.ground_models import default_network
+    from autopilot.recording.record_options import RecordOptions
+    from mission.recordings import record_path
+    from simbridge.world import load_world
+
+    params = config.params
+    recording = record_path(request, params.model()[0])
+    if recording is None:
+        return None, config
+    model, rho = params.model()
+    network_file = None
+    if model == "neural":
+        from learner.model import resolve_model_path
+
+        network_file = str(resolve_model_path(request.network or default_network(rho)))
+    info = {
+        "mission": str(request.mission or request.record_mission or "uploaded by a ground station"),
+        "model": model,
+        "rho": rho,
+        # the network a neural model flies (the packaged one for its rho unless named)
+        "network": (request.network or default_network(rho)) if model == "neural" else None,
+        "online": request.online or "off",
+        "groundfx_version": _version(),
+        # the network file flown and its content's hash (a model's version)
+        "network_file": network_file,
+        "network_sha256": _sha256(network_file),
+        "parameters": {k: float(v) for k, v in sorted(params.values.items())},
+        "world": request.record_world,
+        "sim": request.sim,
+        "identity": request.identity,
+    }
+    world = load_world(request.record_world) if request.record_world else None
+    return recording, dataclasses.replace(config, record=RecordOptions(recording, world, info))
+
+
+def run_autopilot(request: FlightRequest) -> int:
+    """Fly `request` until the flight ends; print the summary. The exit code: 0 landed (or
+    stopped by a signal), 3 not (the link lost, the time limit)."""
+    import numpy as np
+
+    from autopilot.metrics import COLUMNS
+    from autopilot.runner import fly_mission
+    from autopilot.simlink import LinkLost
+
+    stop = []
+    config = _config(request, lambda: bool(stop))
 
     def on_signal(signum: int, frame: object) -> None:
         stop.append(signum)
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
-    recording = record_path(args, params.model()[0])
-    if recording is not None:
-        model, rho = params.model()
-        network_file = None
-        if model == "neural":
-            from learner.model import resolve_model_path
-
-            network_file = str(resolve_model_path(args.network or default_network(rho)))
-        info = {
-            "mission": str(args.mission or args.record_mission or "uploaded by a ground station"),
-            "model": model,
-            "rho": rho,
-            # the network a neural model flies (the packaged one for its rho unless named)
-            "network": (args.network or default_network(rho)) if model == "neural" else None,
-            "online": args.online or "off",
-            "groundfx_version": _version(),
-            # the network file flown and its content's hash (a model's version)
-            "network_file": network_file,
-            "network_sha256": _sha256(network_file),
-            "parameters": {k: float(v) for k, v in sorted(params.values.items())},
-            "world": args.record_world,
-            "sim": args.sim,
-            "identity": args.identity,
-        }
-        world = load_world(args.record_world) if args.record_world else None
-        config = dataclasses.replace(config, record=RecordOptions(recording, world, info))
+    recording, config = _recording(request, config)
     try:
         flight = fly_mission(config)
     except LinkLost as lost:
         print(f"groundfx autopilot: {lost}", file=sys.stderr)
         return 3
-    if args.trajectory:
-        args.trajectory.parent.mkdir(parents=True, exist_ok=True)
-        np.savez(args.trajectory, log=flight.log, columns=np.array(COLUMNS))
+    if request.trajectory:
+        request.trajectory.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(request.trajectory, log=flight.log, columns=np.array(COLUMNS))
     if config.on_step is not None:
         config.on_step.write()
     summary = dict(
-        flight.summary, rho=params.model()[1], recording=str(recording) if recording else None
+        flight.summary,
+        rho=config.params.model()[1],
+        recording=str(recording) if recording else None,
     )
-    if args.json:
+    if request.json:
         print(json.dumps(summary), flush=True)
     else:
         print(

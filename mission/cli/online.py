@@ -1,6 +1,7 @@
-"""The command-line side of online learning: `--online METHOD` and its companions for
-`groundfx autopilot` and `groundfx fly` (with a ground station, GFX_OL_METHOD and the other
-GFX_OL_* parameters do the same in flight), and `groundfx learn memory|online-eval`."""
+"""The command-line side of online learning: what `--online METHOD` and its companions (the
+flight request's options, autopilot/request.py) ask of the autopilot (with a ground station,
+GFX_OL_METHOD and the other GFX_OL_* parameters do the same in flight), and `groundfx learn
+memory|online-eval`."""
 
 from __future__ import annotations
 
@@ -8,41 +9,7 @@ import argparse
 from pathlib import Path
 
 from learner.online.names import METHODS, method_number
-from learner.online.settings import tuned_in_flight
 from simbridge.config import ConfigError
-
-
-def add_online_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("online learning")
-    g.add_argument(
-        "--online",
-        choices=METHODS,
-        metavar="METHOD",
-        help=f"adapt the neural model in flight: {', '.join(METHODS)} (parameter GFX_OL_METHOD; "
-        f"hyperparameters {', '.join(tuned_in_flight())} via --param)",
-    )
-    mode = g.add_mutually_exclusive_group()
-    mode.add_argument(
-        "--online-deterministic",
-        dest="online_deterministic",
-        action="store_true",
-        default=None,
-        help="update inside the control step when a batch completes: the same simulated "
-        "times on every run (default with --auto-start / --no-gcs)",
-    )
-    mode.add_argument(
-        "--online-async",
-        dest="online_deterministic",
-        action="store_false",
-        help="update in the learner thread; the control loop never waits "
-        "(default with a ground station)",
-    )
-    g.add_argument(
-        "--save-model",
-        dest="save_model",
-        type=Path,
-        help="save the adapted network here at the end",
-    )
 
 
 def online_overrides(args: argparse.Namespace) -> dict[str, float]:
@@ -64,18 +31,6 @@ def online_options(args: argparse.Namespace, reproducible: bool) -> object:
     if deterministic is None:
         deterministic = reproducible
     return OnlineOptions(deterministic=deterministic, save_path=args.save_model)
-
-
-def pass_through(args: argparse.Namespace) -> list[str]:
-    """The online options again, for the autopilot process that `fly` starts."""
-    out: list[str] = []
-    if getattr(args, "online", None):
-        out += ["--online", args.online]
-    if args.online_deterministic is not None:
-        out.append("--online-deterministic" if args.online_deterministic else "--online-async")
-    if args.save_model is not None:
-        out += ["--save-model", str(args.save_model.resolve())]
-    return out
 
 
 def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) -> None:
