@@ -106,17 +106,29 @@ class MissionError(ValueError):
         self.seq, self.field, self.result = seq, field, result
 
 
-def _finite(seq: int, item: MissionItem, names: tuple[str, ...]) -> None:
+def _finite(seq: int, item: MissionItem, names: tuple[str, ...], nan_ok: bool = False) -> None:
+    """`nan_ok`: an unused parameter may be NaN (MAVSDK's "not set"), never infinite."""
     results = {
         "param1": mav.MAV_MISSION_INVALID_PARAM1,
         "param2": mav.MAV_MISSION_INVALID_PARAM2,
         "param3": mav.MAV_MISSION_INVALID_PARAM3,
+        "param4": mav.MAV_MISSION_INVALID_PARAM4,
         "z": mav.MAV_MISSION_INVALID_PARAM7,
     }
     for name in names:
         value = getattr(item, name)
-        if not math.isfinite(value):
+        if math.isinf(value) or (math.isnan(value) and not nan_ok):
             raise MissionError(seq, item, name, f"{value} is not a finite number", results[name])
+
+
+def degrees_e7(seq: int, item: MissionItem, field: str, degrees: float) -> int:
+    """A latitude or longitude in degrees (MISSION_ITEM's floats) as degE7. NaN or inf is
+    refused: rounded to an integer it would be a real place (0 deg: the equator)."""
+    result = mav.MAV_MISSION_INVALID_PARAM5_X if field == "x" else mav.MAV_MISSION_INVALID_PARAM6_Y
+    if not math.isfinite(degrees):
+        raise MissionError(seq, item, field, f"{degrees} is not a finite number", result)
+    # far outside any range, yet an int: the range check below names it
+    return round(max(-1e12, min(1e12, degrees * 1e7)))
 
 
 def local_offset(item: MissionItem, home: Home) -> Vec3:
@@ -145,6 +157,7 @@ def validate_item(seq: int, item: MissionItem, home: Home, fence: Geofence) -> N
             f"{item.frame} is not one of {sorted(allowed)} ({', '.join(allowed.values())})",
             mav.MAV_MISSION_UNSUPPORTED_FRAME,
         )
+    _finite(seq, item, ("param1", "param2", "param3", "param4", "z"), nan_ok=True)
     if item.command == DO_CHANGE_SPEED:
         _finite(seq, item, ("param2",))
         if not 0.0 < item.param2 <= 20.0 and item.param2 != -1.0:

@@ -20,6 +20,7 @@ from autopilot.gcs import telemetry
 from autopilot.gcs.link import GcsLink
 from autopilot.gcs.mission_protocol import MissionProtocol, Outcome
 from autopilot.gcs.param_protocol import ftp_nak, handle_param
+from autopilot.gcs.refusals import RefusalLimiter
 from autopilot.identity import Identity
 from autopilot.params import ParamStore
 from autopilot.types import FlightMode, FlightState
@@ -29,8 +30,6 @@ from simbridge.hil import mavlink as mav
 DENIED, UNSUPPORTED = mav.MAV_RESULT_DENIED, mav.MAV_RESULT_UNSUPPORTED
 FORCE_MAGIC = 21196  # ARM_DISARM param2: arm or disarm whatever the checks say
 SIGNING_SAVE_S = 10.0  # wall seconds between saves of the signing timestamp
-REFUSAL_REPEAT_S = 5.0  # wall seconds before the same refused setpoint is explained again
-MAX_REFUSALS = 64
 GUIDED_ITEM = 2  # MISSION_ITEM.current 2: ArduPilot's guided target, not a mission item
 
 
@@ -65,7 +64,7 @@ class GroundStation:
     surface_z: float | None = None  # local z of the surface under the vehicle on the ground
     last_status: tuple[Any, ...] | None = None
     text_id: int = 0
-    refusals: dict[str, float] = field(default_factory=dict)  # setpoint refusal -> wall time
+    refusals: RefusalLimiter = field(default_factory=RefusalLimiter)
     # MAV_CMD -> its handler: `COMMANDS`, which one station's table may add to
     commands: dict[int, CommandHandler] = field(default_factory=lambda: dict(COMMANDS))
 
@@ -236,10 +235,7 @@ class GroundStation:
         cmd, refused = guided.setpoint(m, cmd, self._context(cmd, inp))
         if refused is not None:
             self.link.counters.invalid += 1
-            if inp.wall_s - self.refusals.get(refused, -math.inf) > REFUSAL_REPEAT_S:
-                if len(self.refusals) > MAX_REFUSALS:  # hostile input: bounded all the same
-                    self.refusals.clear()
-                self.refusals[refused] = inp.wall_s  # a stream's refusal, said once
+            if self.refusals.due(refused, inp.wall_s):
                 self._text(inp, refused, mav.MAV_SEVERITY_WARNING)
         return cmd
 
@@ -403,7 +399,7 @@ class GroundStation:
         outcome = handle_param(self.params, m)
         if outcome.invalid:
             self.link.counters.invalid += 1
-        if outcome.refused:
+        if outcome.refused and self.refusals.due(outcome.refusal_kind, inp.wall_s):
             self._text(inp, outcome.refused, mav.MAV_SEVERITY_WARNING)
         if outcome.changed:
             self.on_event(inp.time_s, outcome.changed)

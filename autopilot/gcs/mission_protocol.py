@@ -11,7 +11,7 @@ Fence and rally lists are empty: they download as zero items and uploads are ref
 
 from __future__ import annotations
 
-import math
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -21,6 +21,7 @@ from autopilot.commander.mission_items import (
     Home,
     MissionError,
     MissionItem,
+    degrees_e7,
     validate_item,
 )
 from autopilot.identity import Identity
@@ -52,24 +53,24 @@ class Outcome:
 
 
 def item_from_message(m: Any) -> MissionItem:
-    """A MISSION_ITEM_INT or a legacy MISSION_ITEM (degrees as floats) as a MissionItem."""
-    if m.get_type() == "MISSION_ITEM":
-        x = round(m.x * 1e7) if math.isfinite(m.x) else 0
-        y = round(m.y * 1e7) if math.isfinite(m.y) else 0
-    else:
-        x, y = int(m.x), int(m.y)
-    return MissionItem(
+    """A MISSION_ITEM_INT or a legacy MISSION_ITEM (degrees as floats) as a MissionItem;
+    MissionError for a legacy item's coordinate that is not a number."""
+    item = MissionItem(
         command=int(m.command),
         frame=int(m.frame),
         param1=float(m.param1),
         param2=float(m.param2),
         param3=float(m.param3),
         param4=float(m.param4),
-        x=x,
-        y=y,
         z=float(m.z),
         autocontinue=int(m.autocontinue),
     )
+    if m.get_type() == "MISSION_ITEM":
+        x = degrees_e7(int(m.seq), item, "x", float(m.x))
+        y = degrees_e7(int(m.seq), item, "y", float(m.y))
+    else:
+        x, y = int(m.x), int(m.y)
+    return dataclasses.replace(item, x=x, y=y)
 
 
 def item_message(item: MissionItem, seq: int, current: bool, target: tuple[int, int]) -> Any:
@@ -157,8 +158,8 @@ class MissionProtocol:
             if m.seq < len(up.items):
                 return Outcome()  # a duplicate of an item already taken
             return Outcome((self._request(len(up.items), peer),))
-        item = item_from_message(m)
         try:
+            item = item_from_message(m)
             validate_item(m.seq, item, home(), fence)
         except MissionError as e:
             self.upload = None

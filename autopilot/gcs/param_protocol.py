@@ -19,6 +19,8 @@ REAL32 = mav.MAV_PARAM_TYPE_REAL32
 class ParamOutcome:
     replies: tuple[Any, ...] = ()
     refused: str | None = None  # why a request was refused (a STATUSTEXT)
+    # the refusal's kind, explained once per kind and while: every misspelt name is one kind
+    refusal_kind: str = ""
     changed: str | None = None  # "NAME = value" when a parameter changed
     invalid: bool = False  # a request naming nothing there is (counted)
 
@@ -51,11 +53,12 @@ def handle_param(store: ParamStore, m: Any) -> ParamOutcome:
     if kind == "PARAM_SET":
         name = param_name(m.param_id)
         if name not in SPECS:
-            return ParamOutcome(refused=f"unknown parameter {name}", invalid=True)
+            why = f"unknown parameter {name}"
+            return ParamOutcome(refused=why, refusal_kind="unknown parameter", invalid=True)
         why = store.set(name, float(m.param_value))
         reply = (param_value(store, name),)  # the value in force, new or old
         if why is not None:
-            return ParamOutcome(reply, refused=why)
+            return ParamOutcome(reply, refused=why, refusal_kind=why)
         return ParamOutcome(reply, changed=f"parameter {name} = {store.values[name]:g}")
     return ParamOutcome()
 
