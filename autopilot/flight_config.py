@@ -16,6 +16,7 @@ from autopilot.online.online_control import OnlineOptions
 from autopilot.params import ParamStore
 from autopilot.recording.record_options import RecordOptions
 from autopilot.request import DEFAULT_MAX_FLIGHT_S
+from autopilot.simlink import DEFAULT_LINK_TIMEOUT_S
 from autopilot.types import FlightState, Step
 from simbridge.rotors import Quad
 from simbridge.vehicle import Vehicle
@@ -34,7 +35,7 @@ class AutopilotConfig:
     identity: str = "px4"
     gcs_urls: tuple[str, ...] = ()
     signing: Signing | None = None
-    link_timeout_s: float = 1.0
+    link_timeout_s: float = DEFAULT_LINK_TIMEOUT_S  # silence that ends the flight
     settle_after_landing_s: float = 0.5  # keep logging after disarm, to see any bounce
     max_flight_s: float = DEFAULT_MAX_FLIGHT_S
     should_stop: Callable[[], bool] = lambda: False  # a signal asked the loop to end

@@ -19,6 +19,7 @@ from typing import Any, NoReturn
 
 from autopilot.control.ground_models import MODEL_NAMES
 from autopilot.identity import IDENTITIES
+from autopilot.simlink import DEFAULT_LINK_TIMEOUT_S
 from learner.online.names import METHODS
 from learner.online.settings import tuned_in_flight
 from simbridge.config import ConfigError
@@ -31,7 +32,7 @@ NO_PARAMS_FILE = "none"  # --params-file none: nothing persists
 
 
 def flight_seconds(text: str) -> float:
-    """A flight limit in seconds, in [1, 86400]."""
+    """A flight's limit (its length, a silence) in seconds, in [1, 86400]."""
     try:
         value = float(text)
     except ValueError:
@@ -125,6 +126,13 @@ class FlightRequest:
         DEFAULT_MAX_FLIGHT_S,
         "end the flight after this many simulated seconds; the autopilot then exits with "
         f"code 3 (default {DEFAULT_MAX_FLIGHT_S:g})",
+        type=flight_seconds,
+    )
+    link_timeout_s: float = option(
+        DEFAULT_LINK_TIMEOUT_S,
+        "end the flight after this many seconds without a word from the simulator; a slow "
+        "simulator is waited for, one that closed its connection ends the flight at once "
+        f"(default {DEFAULT_LINK_TIMEOUT_S:g})",
         type=flight_seconds,
     )
     online: str | None = option(

@@ -63,6 +63,7 @@ from autopilot.truth import true_height_m, true_state
 from autopilot.tuning import Tuning
 from autopilot.types import FlightMode, FlightState, Setpoint, Step
 from simbridge.frames import Vec3
+from simbridge.hil import mavlink as mav
 from simbridge.rotors import Quad
 
 __all__ = ["MODES", "AutopilotConfig", "Flight", "fly_mission"]
@@ -436,6 +437,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
             ended = _step(p, s)
     except LinkLost as lost:
         ended = str(lost)
+        # the ground stations hear why, before the link to them closes too
+        p.station.say(ended, s.last_t_s, time.monotonic(), mav.MAV_SEVERITY_CRITICAL)
     finally:
         # the loop's time: stopping the learner and closing links and files is not flying
         wall = time.perf_counter() - wall0

@@ -3,8 +3,9 @@ the simulator is ours, `unix:PATH` (simbridge/transport.py: blocking reads, no p
 
 Each step it reads the simulator's messages up to HIL_SENSOR (the tick) and answers with one
 HIL_ACTUATOR_CONTROLS stamped with that tick's time and the lockstep flag. Malformed and
-unknown messages are counted and dropped; a closed socket or a silent simulator ends the
-flight with `LinkLost`.
+unknown messages are counted and dropped. A slow simulator (a loaded machine, a debugger, a
+stopped process) is waited for: only a gone one ends the flight with `LinkLost`, whose message
+says which way it went, a closed socket (the process exited) or silence beyond `timeout_s`.
 
 Until the first reply the simulator streams its ticks at real-time pace (the vehicle on its
 stand), so an autopilot starved after connecting (a busy machine) finds a backlog of ticks.
@@ -25,6 +26,7 @@ from simbridge.hil import mavlink
 from simbridge.wire import FrameReader, PacketSequence, WirePacker
 
 AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID = 1, 1
+DEFAULT_LINK_TIMEOUT_S = transport.PEER_SILENCE_S
 
 
 class LinkLost(Exception):
@@ -37,7 +39,9 @@ def parse_url(url: str) -> None:
 
 
 class SimLink:
-    def __init__(self, url: str, timeout_s: float = 1.0, connect_timeout_s: float = 10.0) -> None:
+    def __init__(
+        self, url: str, timeout_s: float = DEFAULT_LINK_TIMEOUT_S, connect_timeout_s: float = 10.0
+    ) -> None:
         try:
             self._sock = transport.connect(url, connect_timeout_s)
         except ConnectionError as err:  # nothing listening until the connect timeout
@@ -146,7 +150,7 @@ class SimLink:
         try:
             data = self._sock.recv(65536)  # blocking, bounded by SO_RCVTIMEO
         except (BlockingIOError, TimeoutError):
-            raise LinkLost(f"lost the simulator link: no data for {self._wait_s():g} s") from None
+            raise LinkLost(f"lost the simulator link: silent for {self._wait_s():g} s") from None
         except OSError as err:
             raise LinkLost(
                 f"lost the simulator link: {(err.strerror or str(err)).lower()}"

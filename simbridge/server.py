@@ -33,7 +33,7 @@ class ServerOptions:
     port: int = 4560  # 0: an ephemeral port, printed when listening
     unix_path: str | None = None  # listen on this Unix-domain socket instead of TCP
     speedup: float | None = 1.0  # simulated seconds per wall second; None: as fast as possible
-    timeout_s: float = 10.0  # longest wait for an autopilot's reply in lockstep
+    timeout_s: float = transport.PEER_SILENCE_S  # longest wait for a reply in lockstep
     wait: bool = False  # after an autopilot leaves, wait for the next one (a fresh world)
     # Lockstep from the first tick: wait for the reply to the first state before stepping.
     # Flights are then the same to the bit however slowly the autopilot starts; PX4 needs its

@@ -17,6 +17,10 @@ import struct
 import time
 
 TCP, UNIX = "tcp", "unix"
+# How long either side waits for its lockstep peer by default. A slow peer (a loaded machine,
+# a debugger, a stopped process) is waited for; a gone one closes its socket, which ends the
+# wait at once. Only a peer silent this long, yet connected, is given up on.
+PEER_SILENCE_S = 30.0
 
 
 def parse_url(url: str, option: str = "--sim") -> tuple[str, str, int]:

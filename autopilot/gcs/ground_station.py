@@ -138,13 +138,16 @@ class GroundStation:
         self.link.send(message, inp.wall_s)
 
     def _text(self, inp: StepInput, text: str, severity: int = mav.MAV_SEVERITY_INFO) -> None:
+        self.say(text, inp.time_s, inp.wall_s, severity)
+
+    def say(self, text: str, time_s: float, wall_s: float, severity: int) -> None:
         """STATUSTEXT; a text over 50 bytes goes in chunks sharing an id (MAVLink 2)."""
-        self.on_event(inp.time_s, text)
+        self.on_event(time_s, text)
         messages = telemetry.statustext(text, severity, self.text_id % 65535 + 1)
         if len(messages) > 1:
             self.text_id = self.text_id % 65535 + 1
         for message in messages:
-            self.send(message, inp)
+            self.link.send(message, wall_s)
 
     def _snapshot(self, cmd: CommanderState, inp: StepInput) -> telemetry.Snapshot:
         return telemetry.Snapshot(

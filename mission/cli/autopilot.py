@@ -134,6 +134,7 @@ def _config(request: FlightRequest, should_stop: Any) -> Any:
         should_stop=should_stop,
         on_step=_flight_log_writer(request),
         max_flight_s=request.max_flight_s,
+        link_timeout_s=request.link_timeout_s,
         online=online_options(request, reproducible=request.auto_start),
     )
 

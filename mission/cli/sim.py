@@ -10,6 +10,7 @@ import sys
 from typing import Any
 
 from mission.cli.options import port, speedup
+from simbridge.transport import PEER_SILENCE_S
 
 
 def terminate(_signum: int, _frame: object) -> None:
@@ -54,8 +55,10 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--timeout",
         type=float,
-        default=10.0,
-        help="seconds to wait for an autopilot's reply in lockstep (default: 10)",
+        default=PEER_SILENCE_S,
+        help="seconds to wait for an autopilot's reply in lockstep; a slow autopilot is "
+        "waited for, one that closed its connection ends the run at once "
+        f"(default: {PEER_SILENCE_S:g})",
     )
     p.add_argument(
         "--wait",
