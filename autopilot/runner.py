@@ -160,7 +160,7 @@ def _open(config: AutopilotConfig, trace: FlightTrace) -> Parts:
     gc.collect()
     gc.freeze()  # what exists now (modules, models, the world) is never scanned again
     try:
-        link = SimLink(config.sim_url, timeout_s=config.link_timeout_s)
+        link = SimLink(config.sim_url, config.link_timeout_s, stop=config.should_stop)
     except LinkLost as lost:
         recorder.close(str(lost))
         gcs.close()

@@ -17,6 +17,7 @@ stale. In lockstep there is never more than one tick waiting.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from autopilot.types import Step
@@ -26,6 +27,7 @@ from simbridge.hil import mavlink
 from simbridge.wire import FrameReader, PacketSequence, WirePacker
 
 AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID = 1, 1
+LOST = "lost the simulator link"  # how every mid-flight `LinkLost` message begins
 DEFAULT_LINK_TIMEOUT_S = transport.PEER_SILENCE_S
 
 
@@ -40,10 +42,14 @@ def parse_url(url: str) -> None:
 
 class SimLink:
     def __init__(
-        self, url: str, timeout_s: float = DEFAULT_LINK_TIMEOUT_S, connect_timeout_s: float = 10.0
+        self,
+        url: str,
+        timeout_s: float = DEFAULT_LINK_TIMEOUT_S,
+        connect_timeout_s: float = 10.0,
+        stop: Callable[[], bool] = lambda: False,
     ) -> None:
         try:
-            self._sock = transport.connect(url, connect_timeout_s)
+            self._sock = transport.connect(url, connect_timeout_s, stop)
         except ConnectionError as err:  # nothing listening until the connect timeout
             raise LinkLost(str(err)) from None
         except OSError as err:
@@ -150,13 +156,11 @@ class SimLink:
         try:
             data = self._sock.recv(65536)  # blocking, bounded by SO_RCVTIMEO
         except (BlockingIOError, TimeoutError):
-            raise LinkLost(f"lost the simulator link: silent for {self._wait_s():g} s") from None
+            raise LinkLost(f"{LOST}: silent for {self._wait_s():g} s") from None
         except OSError as err:
-            raise LinkLost(
-                f"lost the simulator link: {(err.strerror or str(err)).lower()}"
-            ) from None
+            raise LinkLost(f"{LOST}: {(err.strerror or str(err)).lower()}") from None
         if not data:
-            raise LinkLost("lost the simulator link: it closed the connection")
+            raise LinkLost(f"{LOST}: it closed the connection")
         if not self.received:
             transport.set_recv_timeout(self._sock, self._timeout_s)
         self._queue_frames(data)
@@ -209,7 +213,7 @@ class SimLink:
         try:
             self._sock.sendall(self._pack.pack(time_us, c, mode, LOCKSTEP_FLAG))
         except OSError:
-            raise LinkLost("lost the simulator link: it closed the connection") from None
+            raise LinkLost(f"{LOST}: it closed the connection") from None
 
     def close(self) -> None:
         self._sock.close()

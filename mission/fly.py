@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -143,21 +144,20 @@ def fly(
     gcs: dict[str, Any] = {}
     try:
         if station is None:
-            autopilot = subprocess.run(
-                request_command(request), capture_output=True, text=True, timeout=1800
-            )
-            out, err, code = autopilot.stdout, autopilot.stderr, autopilot.returncode
+            process = _start(request_command(request), sim)
+            try:
+                out, err = process.communicate(timeout=1800)
+            finally:
+                if process.poll() is None:
+                    process.kill()
+                    process.communicate()
+            code = process.returncode
         else:
             gcs_port = station.conn.port.getsockname()[1]
             station.on_text = lambda text: say(f"vehicle: {text}")
             out = (f"udpout:127.0.0.1:{gcs_port}", *request.out)
             request = dataclasses.replace(request, out=out)
-            process = subprocess.Popen(
-                request_command(request),
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                text=True,
-            )
+            process = _start(request_command(request), sim)
             try:
                 gcs = _fly_with(station, doc, process, say)
                 out, err = process.communicate(timeout=120)
@@ -172,6 +172,8 @@ def fly(
         if station is not None:
             station.close()
     lines = out.strip().splitlines()
+    if sim.returncode != 0 and not lines:  # the simulator failed first: its reason
+        raise ConfigError(f"the flight ended: {sim_line}")
     if code == 2 or not lines:
         raise ConfigError(
             err.strip().splitlines()[-1] if err.strip() else "the autopilot printed nothing"
@@ -185,6 +187,21 @@ def fly(
         ground_station=gcs,
     )
     return summary
+
+
+def _start(command: list[str], sim: subprocess.Popen[str]) -> subprocess.Popen[str]:
+    """The autopilot process, watched beside its simulator: a simulator that fails while the
+    autopilot runs ends the flight at once (one that failed before the autopilot connected
+    would leave it retrying its connection; one that died mid-flight closed its socket,
+    which the autopilot sees itself)."""
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def watch() -> None:
+        if sim.wait() != 0 and process.poll() is None:
+            process.terminate()
+
+    threading.Thread(target=watch, name="simulator watch", daemon=True).start()
+    return process
 
 
 def _fly_with(

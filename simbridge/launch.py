@@ -83,14 +83,26 @@ def spawn_local_sim(
 
 
 def finish(proc: subprocess.Popen[str], timeout_s: float = 10.0) -> str:
-    """Wait for the simulator to end after its client left; returns its last stdout line."""
+    """Wait for the simulator to end after its client left; returns its last stdout line,
+    or, from a simulator that failed without a last word, how it ended."""
     try:
-        out, _ = proc.communicate(timeout=timeout_s)
+        out, err = proc.communicate(timeout=timeout_s)
     except subprocess.TimeoutExpired:
         proc.kill()
-        out, _ = proc.communicate()
-    lines = [ln for ln in out.splitlines() if ln.strip()]
-    return lines[-1] if lines else ""
+        out, err = proc.communicate()
+    lines = [ln for ln in (out or "").splitlines() if ln.strip()]
+    if proc.returncode == 0 or (lines and proc.returncode > 0):
+        return lines[-1] if lines else ""
+    return exit_reason(proc, err or "")
+
+
+def exit_reason(proc: subprocess.Popen[str], stderr: str) -> str:
+    """How a simulator process that failed ended: its exit code or signal, and its last
+    line on stderr (a traceback's error) if it left one."""
+    code = proc.returncode
+    how = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exited with code {code}"
+    last = [ln for ln in stderr.splitlines() if ln.strip()]
+    return f"groundfx sim {how}" + (f": {last[-1].strip()}" if last else "")
 
 
 def supervised_options() -> dict[str, Any]:

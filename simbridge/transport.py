@@ -15,6 +15,7 @@ import os
 import socket
 import struct
 import time
+from collections.abc import Callable
 
 TCP, UNIX = "tcp", "unix"
 # How long either side waits for its lockstep peer by default. A slow peer (a loaded machine,
@@ -49,9 +50,10 @@ def listen(kind: str, where: str, port: int = 0) -> socket.socket:
     return s
 
 
-def connect(url: str, timeout_s: float) -> socket.socket:
+def connect(url: str, timeout_s: float, stop: Callable[[], bool] = lambda: False) -> socket.socket:
     """Connect to `url`, retrying while the peer is not yet listening (it may still be
-    starting); raises ConnectionError after `timeout_s`."""
+    starting); raises ConnectionError after `timeout_s`, or at once once `stop()` is true
+    (a signal, a launcher that saw the peer's process exit)."""
     kind, where, port = parse_url(url)
     deadline = time.monotonic() + timeout_s
     while True:
@@ -69,6 +71,8 @@ def connect(url: str, timeout_s: float) -> socket.socket:
         except (ConnectionRefusedError, FileNotFoundError):
             if time.monotonic() > deadline:
                 raise ConnectionError(f"no simulator at {url}") from None
+            if stop():
+                raise ConnectionError(f"stopped while waiting for a simulator at {url}") from None
             time.sleep(0.02)
     return blocking(s)
 

@@ -11,8 +11,10 @@ import yaml
 from tqdm import tqdm
 
 from autopilot.commander.mission_items import Home, waypoint_items
+from autopilot.flight_config import Flight
 from autopilot.params import MODEL_NAMES, ParamStore
 from autopilot.runner import AutopilotConfig, fly_mission
+from autopilot.simlink import LOST
 from learner.dataset import save_dataset
 from mission.campaigns.sampling import thesis_waypoints
 from simbridge.effects.ground import GroundEffectParams
@@ -54,11 +56,8 @@ def gather(
         bar.update(n - counted[0])
         counted[0] = n
 
-    socket_dir = tempfile.TemporaryDirectory(prefix="groundfx-")
-    socket_path = Path(socket_dir.name) / "sim.sock"
-    sim = spawn_local_sim(world_path, socket_path)  # starts beside this process's flight
     config = AutopilotConfig(
-        sim_url=f"unix:{socket_path}",
+        sim_url="",  # each try's own simulator
         vehicle=vehicle,
         params=params,
         origin=origin,
@@ -70,11 +69,13 @@ def gather(
         max_flight_s=samples / SAMPLE_HZ * 3 + 60,
     )
     try:
-        flight = fly_mission(config)
+        flight = _fly_expert(world_path, config)
+        if flight.ended.startswith(LOST):  # a lost link is flown again, as trials are
+            bar.reset()
+            counted[0] = 0
+            flight = _fly_expert(world_path, config)
     finally:
         bar.close()
-        finish(sim)
-        socket_dir.cleanup()
     if flight.samples is None or len(flight.samples) < samples:
         got = 0 if flight.samples is None else len(flight.samples)
         raise RuntimeError(f"the flight ended ({flight.ended}) after {got} of {samples} samples")
@@ -88,6 +89,17 @@ def gather(
         "expert": f"analytic rho={rho:g}",
     }
     return save_dataset(out, flight.samples, meta)
+
+
+def _fly_expert(world_path: Path, config: AutopilotConfig) -> Flight:
+    """One flight of `config` against a simulator process of its own."""
+    with tempfile.TemporaryDirectory(prefix="groundfx-") as socket_dir:
+        socket_path = Path(socket_dir) / "sim.sock"
+        sim = spawn_local_sim(world_path, socket_path)  # starts beside this process's flight
+        try:
+            return fly_mission(dataclasses.replace(config, sim_url=f"unix:{socket_path}"))
+        finally:
+            finish(sim)
 
 
 def world_yaml_with_rho(world_yaml: str, rho: float) -> str:
