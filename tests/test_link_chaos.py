@@ -1,0 +1,115 @@
+"""A slow simulator is waited for, a gone one ends the flight at once and says so: real
+processes (`groundfx sim`, `groundfx autopilot`, a pymavlink ground station), the simulator
+stopped with SIGSTOP mid-hover or killed with SIGKILL."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from autopilot.commander.mission_items import Home
+from learner.flightlogs.recording import SUMMARY, read_recording
+from mission.fly import gcs_autopilot_command
+from mission.gcs_client import GroundStation
+from mission.plans.formats import load_mission_file
+from simbridge.launch import finish, start_sim
+from simbridge.world import load_world
+
+WORLD_ORIGIN = load_world("default").origin
+ORIGIN = Home(WORLD_ORIGIN.lat_deg, WORLD_ORIGIN.lon_deg, WORLD_ORIGIN.alt_m)
+HOVER = """\
+name: chaos_hover
+takeoff_altitude_m: 0.5
+waypoints:
+  - {position_m: [0.0, 0.0, 0.5], hold_s: 6.0}
+land: true
+"""
+STOPPED_S = 3.0  # how long the simulator is frozen: three times the link timeout it once had
+IN_AIR = mav.MAV_LANDED_STATE_IN_AIR
+
+
+@contextlib.contextmanager
+def flight(
+    tmp_path: Path,
+) -> Iterator[tuple[GroundStation, subprocess.Popen[str], subprocess.Popen[str], Path]]:
+    """A real-time simulator and an autopilot recording to a file, reporting to a pymavlink
+    ground station that has uploaded the hover mission, armed and started it."""
+    mission = tmp_path / "hover.yaml"
+    mission.write_text(HOVER)
+    recording = tmp_path / "flight.rrd"
+    station = GroundStation("udpin:127.0.0.1:0")
+    sim, port = start_sim("default", speedup="1")
+    gcs_port = station.conn.port.getsockname()[1]
+    command = gcs_autopilot_command(port, gcs_port, "--json", f"--record={recording}")
+    autopilot = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    station.vehicle_alive = lambda: autopilot.poll() is None
+    try:
+        station.connect(timeout_s=20.0)
+        station.upload(load_mission_file(mission, ORIGIN).items)
+        station.wait_armable()
+        station.require(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arming")
+        station.require(mav.MAV_CMD_MISSION_START, 0, 0, what="mission start")
+        yield station, sim, autopilot, recording
+    finally:
+        if autopilot.poll() is None:
+            autopilot.terminate()
+        autopilot.communicate(timeout=30)
+        with contextlib.suppress(ProcessLookupError):
+            sim.send_signal(signal.SIGCONT)
+        finish(sim)
+        station.close()
+
+
+def hovering(station: GroundStation) -> None:
+    """Until the vehicle is in the air and has reached its hover waypoint."""
+    p = station.progress
+    station.wait_for(
+        "the hover", lambda m: p.landed_state == IN_AIR and 1 in p.reached, timeout_s=60.0
+    )
+
+
+def test_a_simulator_stopped_mid_hover_is_waited_for_and_the_flight_lands(tmp_path):
+    with flight(tmp_path) as (station, sim, autopilot, recording):
+        hovering(station)
+        sim.send_signal(signal.SIGSTOP)
+        resume_at = time.monotonic() + STOPPED_S
+        while time.monotonic() < resume_at:  # the station stays heard meanwhile
+            station.receive(resume_at - time.monotonic())
+        assert station.progress.landed_state == IN_AIR  # it was stopped in the air
+        sim.send_signal(signal.SIGCONT)
+        p = station.progress
+        station.wait_for("disarm after landing", lambda m: not p.armed, timeout_s=120.0)
+        out, err = autopilot.communicate(timeout=60)
+    assert autopilot.returncode == 0, err
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["ended"] == "landed" and summary["landed"]
+    assert not any("lost the simulator link" in text for text in station.progress.texts)
+    assert read_recording(recording).complete
+
+
+def test_a_killed_simulator_ends_the_flight_at_once_saying_why(tmp_path):
+    closed = "lost the simulator link: it closed the connection"
+    with flight(tmp_path) as (station, sim, autopilot, recording):
+        hovering(station)
+        sim.kill()
+        # told to the ground station before the autopilot closes its link to it
+        station.wait_for("the reason", lambda m: closed in station.progress.texts, timeout_s=20.0)
+        out, err = autopilot.communicate(timeout=20)  # a bound, far below the link timeout
+    assert autopilot.returncode == 3
+    assert closed in err
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["ended"] == closed and not summary["landed"]
+    rec = read_recording(recording)
+    assert rec.complete
+    assert json.loads(rec.static(SUMMARY, "TextDocument:text"))["ended"] == closed
+    assert any(closed in text for _, _, text in rec.texts())
+    assert len(rec.trajectory()) > 0
