@@ -57,7 +57,7 @@ def _demo() -> Figures:
 
 def _hold_errors_m(seeds: list[int], model: str, world: str) -> list[float]:
     """`groundfx learn evaluate`'s trials of one model. A flight whose link was cut (a process
-    stalled for a second on a loaded machine) has no hold: it is flown again, and being
+    gone, or silent past the link timeout) has no hold: it is flown again, and being
     seeded and in lockstep it flies as it would have."""
     from mission.campaigns.trials import fly_landing_trials
 

@@ -43,6 +43,7 @@ import yaml
 
 from autopilot.control.controller import THESIS_GAINS
 from autopilot.metrics import FAR_FROM_GROUND_M, NEAR_GROUND_M
+from autopilot.simlink import LOST
 from learner.flightlogs.readers import read_log
 from learner.model import load_model
 from learner.online.names import METHODS, NEEDS_BASIS, PROTECTING
@@ -62,7 +63,7 @@ SAME_M = 1e-5  # 0.01 mm: hold errors closer than this are the same
 # cushion its model mispredicts can take minutes to land on the thesis's PD: flights end
 # this long after the hold's nominal end.
 FLIGHT_S_AFTER_HOLD = 35.0
-LINK_LOST = "lost the simulator link"  # autopilot/runner.py's words, as the experiments' runner
+LINK_LOST = LOST
 LINK_RETRIES = 2
 BASIS_NETWORK = "grounds"  # the packaged basis model (learner/basis.py)
 CONTROLLERS: dict[str, tuple[str, ...]] = {
@@ -117,9 +118,9 @@ def flight_summary(
     *extra: str,
     flight_log: Path | None = None,
 ) -> dict[str, Any]:
-    """One seeded flight's summary. A flight whose simulator link was lost (a machine so
-    loaded that a process went a second without a step) is flown again, as the experiments'
-    runner does: lockstep makes the retry the same flight."""
+    """One seeded flight's summary. A flight whose simulator link was lost (its process
+    gone, or silent past the link timeout) is flown again, as the experiments' runner does:
+    lockstep makes the retry the same flight."""
     for _ in range(LINK_RETRIES + 1):
         summary = fly(
             mission,

@@ -12,6 +12,7 @@ from typing import Any
 
 import yaml
 
+from autopilot.simlink import LOST
 from mission.campaigns.experiments.definitions import MEASURES, MULTI_NETWORK, Flight, Trial
 from mission.campaigns.experiments.missions import make_mission
 from mission.campaigns.gather import world_yaml_with_rho
@@ -22,9 +23,9 @@ from simbridge.world import resolve_world_path
 # written at the end of the flight (4.4 flies it again).
 ONLINE_OPTION = "--online"
 SAVE_NETWORK_OPTION = "--save-model"
-# A starved machine can stall a process past the autopilot's 1 s link timeout: the flight is
-# flown again (it is deterministic, so the retry gives what an unstarved flight would have).
-LINK_LOST = "lost the simulator link"
+# A flight whose simulator link was lost (its process gone, or silent past the link timeout)
+# is flown again (it is deterministic, so the retry gives what an undisturbed flight would have).
+LINK_LOST = LOST
 LINK_RETRIES = 2
 # Kept from each flight's summary in the results file (the rest is wall-clock noise or bulk).
 KEPT = (
