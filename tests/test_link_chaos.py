@@ -14,13 +14,15 @@ from collections.abc import Iterator
 from pathlib import Path
 
 os.environ.setdefault("MAVLINK20", "1")
+import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from autopilot.commander.mission_items import Home
 from learner.flightlogs.recording import SUMMARY, read_recording
-from mission.fly import gcs_autopilot_command
+from mission.fly import fly, gcs_autopilot_command
 from mission.gcs_client import GroundStation
 from mission.plans.formats import load_mission_file
+from simbridge.config import ConfigError
 from simbridge.launch import finish, start_sim
 from simbridge.world import load_world
 
@@ -113,3 +115,12 @@ def test_a_killed_simulator_ends_the_flight_at_once_saying_why(tmp_path):
     assert json.loads(rec.static(SUMMARY, "TextDocument:text"))["ended"] == closed
     assert any(closed in text for _, _, text in rec.texts())
     assert len(rec.trajectory()) > 0
+
+
+def test_a_simulator_that_fails_at_start_ends_fly_with_its_reason(tmp_path):
+    """The autopilot, started beside it, would retry its connection; the launcher saw the
+    simulator exit and says why."""
+    mission = tmp_path / "hover.yaml"
+    mission.write_text(HOVER)
+    with pytest.raises(ConfigError, match=r"groundfx sim exited with code 2: .*--sensor-seed"):
+        fly(mission, via_gcs=False, record=False, sim_options=["--sensor-seed=-1"])
