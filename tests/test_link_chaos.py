@@ -35,7 +35,7 @@ waypoints:
   - {position_m: [0.0, 0.0, 0.5], hold_s: 6.0}
 land: true
 """
-STOPPED_S = 3.0  # how long the simulator is frozen: three times the link timeout it once had
+STOPPED_S = 3.0  # how long the simulator is frozen: longer than a loaded machine stalls it
 IN_AIR = mav.MAV_LANDED_STATE_IN_AIR
 
 
