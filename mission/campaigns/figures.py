@@ -157,11 +157,25 @@ def _gap() -> Figures:
     }
 
 
+def _experiments() -> Figures:
+    """`groundfx experiment all` at its defaults: the summary's table of conditions and its
+    verdicts, as the run's summary.md writes them (its wall time left out)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        _groundfx("experiment", "all", "--out", tmp, "--no-progress")
+        summary = (Path(tmp) / "summary.md").read_text()
+    table = [ln for ln in summary.splitlines() if ln.startswith("|")]
+    verdicts = [ln for ln in summary.splitlines() if ln.startswith("- 4.")]
+    if not table or not verdicts:
+        raise RuntimeError(f"groundfx experiment all wrote no table or verdicts:\n{summary}")
+    return {"table": "\n" + "\n".join(table) + "\n", "verdicts": "\n" + "\n".join(verdicts) + "\n"}
+
+
 SOURCES = (
     Source("lift", "groundfx demo --lift", _lift),
     Source("demo", "groundfx demo", _demo),
     Source("evaluate", "groundfx learn evaluate", _evaluate),
     Source("gap", GAP_COMMANDS, _gap),
+    Source("experiments", "groundfx experiment all --out logs/experiments", _experiments),
 )
 
 
