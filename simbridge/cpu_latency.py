@@ -11,13 +11,13 @@ Linux lets a program ask for a bound on that latency: open `/dev/cpu_dma_latency
 Documentation/power/pm_qos_interface.rst; cyclictest and tuned's latency-performance
 profile do the same). With 0 the idle CPUs take the cpuidle state whose exit latency is
 0, the kernel's polling idle loop, which gives way at once to any runnable task: the
-processes still block, and a third process finds the CPUs as free as before. The price is
+processes still block, and a third process finds the CPUs as free as without it. The price is
 power (idle CPUs spin while the request is held; on a virtual machine its host sees the
 idle virtual CPUs busy), so the simulator holds it only while it serves a lockstep flight
 as fast as possible, and `--no-low-latency-idle` declines it.
 
 Writing the file needs root (or a udev rule); where it cannot be written the flight runs
-as before and the simulator's summary says why.
+without it and the simulator's summary says why.
 """
 
 from __future__ import annotations

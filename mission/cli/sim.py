@@ -78,7 +78,7 @@ def add_parser(sub: Any) -> None:
         help="as fast as possible (--speedup max), hold the kernel's CPU wake-up latency "
         "request (/dev/cpu_dma_latency at 0 us) while an autopilot is served, so that "
         "lockstep pays no halted-CPU wake-ups; idle CPUs then spin in the kernel's idle "
-        "loop meanwhile (power). Needs root; without it the flight runs as before "
+        "loop meanwhile (power). Needs root; without it the flight runs unchanged "
         "(default: on)",
     )
     p.set_defaults(func=cmd_sim)
