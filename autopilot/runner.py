@@ -57,7 +57,7 @@ from autopilot.online.online_control import OnlineControl, vertical_tracking_err
 from autopilot.online.sample_schedule import SampleSchedule
 from autopilot.recording.record_options import RecordOptions
 from autopilot.recording.recorder import Recorder, open_recorder
-from autopilot.simlink import LinkLost, SimLink
+from autopilot.simlink import LinkLost, SimLink, Stopped
 from autopilot.summary import MODES, FlightTrace, flight_figures, trace_log
 from autopilot.truth import true_height_m, true_state
 from autopilot.tuning import Tuning
@@ -435,6 +435,8 @@ def fly_mission(config: AutopilotConfig) -> Flight:
     try:
         while ended is None:
             ended = _step(p, s)
+    except Stopped:
+        ended = "stopped"
     except LinkLost as lost:
         ended = str(lost)
         # the ground stations hear why, before the link to them closes too

@@ -29,6 +29,13 @@ from simbridge.wire import FrameReader, PacketSequence, WirePacker
 AUTOPILOT_SYSTEM_ID, AUTOPILOT_COMPONENT_ID = 1, 1
 LOST = "lost the simulator link"  # how every mid-flight `LinkLost` message begins
 DEFAULT_LINK_TIMEOUT_S = transport.PEER_SILENCE_S
+# A wait for the simulator is cut in slices this long, so that a stop request is heard while a
+# slow (or stopped) simulator is waited for; a step that arrives in time never sees one.
+WAIT_SLICE_S = 0.25
+
+
+class Stopped(Exception):
+    """A stop was asked (a signal) while the simulator was waited for."""
 
 
 class LinkLost(Exception):
@@ -58,7 +65,8 @@ class SimLink:
         # the first state may take longer: a simulator starved on a loaded machine (or an
         # outside one still building its world) is not a lost link
         self._first_timeout_s = max(timeout_s, connect_timeout_s)
-        transport.set_recv_timeout(self._sock, self._first_timeout_s)
+        self._stop = stop
+        transport.set_recv_timeout(self._sock, min(WAIT_SLICE_S, self._first_timeout_s))
         transport.set_send_timeout(self._sock, timeout_s)
         self._reader = FrameReader(mavlink)
         self._queue: list[tuple[str, dict[str, Any]]] = []
@@ -153,16 +161,21 @@ class SimLink:
 
     def _read(self) -> None:
         """One blocking read into the queue of decoded frames."""
-        try:
-            data = self._sock.recv(65536)  # blocking, bounded by SO_RCVTIMEO
-        except (BlockingIOError, TimeoutError):
-            raise LinkLost(f"{LOST}: silent for {self._wait_s():g} s") from None
-        except OSError as err:
-            raise LinkLost(f"{LOST}: {(err.strerror or str(err)).lower()}") from None
+        waited_s = 0.0
+        while True:
+            try:
+                data = self._sock.recv(65536)  # blocking, bounded by SO_RCVTIMEO
+                break
+            except (BlockingIOError, TimeoutError):
+                waited_s += WAIT_SLICE_S
+                if self._stop():
+                    raise Stopped from None
+                if waited_s >= self._wait_s():
+                    raise LinkLost(f"{LOST}: silent for {self._wait_s():g} s") from None
+            except OSError as err:
+                raise LinkLost(f"{LOST}: {(err.strerror or str(err)).lower()}") from None
         if not data:
             raise LinkLost(f"{LOST}: it closed the connection")
-        if not self.received:
-            transport.set_recv_timeout(self._sock, self._timeout_s)
         self._queue_frames(data)
 
     def _queue_frames(self, data: bytes, stop_after: str | None = "HIL_SENSOR") -> None:

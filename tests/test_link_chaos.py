@@ -37,6 +37,7 @@ land: true
 """
 STOPPED_S = 3.0  # how long the simulator is frozen: longer than a loaded machine stalls it
 IN_AIR = mav.MAV_LANDED_STATE_IN_AIR
+LANDING = mav.MAV_LANDED_STATE_LANDING
 
 
 @contextlib.contextmanager
@@ -62,11 +63,11 @@ def flight(
         station.require(mav.MAV_CMD_MISSION_START, 0, 0, what="mission start")
         yield station, sim, autopilot, recording
     finally:
+        with contextlib.suppress(ProcessLookupError):
+            sim.send_signal(signal.SIGCONT)
         if autopilot.poll() is None:
             autopilot.terminate()
         autopilot.communicate(timeout=30)
-        with contextlib.suppress(ProcessLookupError):
-            sim.send_signal(signal.SIGCONT)
         finish(sim)
         station.close()
 
@@ -86,7 +87,8 @@ def test_a_simulator_stopped_mid_hover_is_waited_for_and_the_flight_lands(tmp_pa
         resume_at = time.monotonic() + STOPPED_S
         while time.monotonic() < resume_at:  # the station stays heard meanwhile
             station.receive(resume_at - time.monotonic())
-        assert station.progress.landed_state == IN_AIR  # it was stopped in the air
+        # it was stopped in the air: hovering, or already landing on a slow machine
+        assert station.progress.landed_state in (IN_AIR, LANDING)
         sim.send_signal(signal.SIGCONT)
         p = station.progress
         station.wait_for("disarm after landing", lambda m: not p.armed, timeout_s=120.0)
@@ -95,6 +97,20 @@ def test_a_simulator_stopped_mid_hover_is_waited_for_and_the_flight_lands(tmp_pa
     summary = json.loads(out.strip().splitlines()[-1])
     assert summary["ended"] == "landed" and summary["landed"]
     assert not any("lost the simulator link" in text for text in station.progress.texts)
+    assert read_recording(recording).complete
+
+
+def test_an_autopilot_waiting_for_a_stopped_simulator_stops_when_asked(tmp_path):
+    """Ctrl-C (SIGINT) or SIGTERM is heard while a frozen simulator is waited for: the flight
+    ends as stopped, not after the link's silence limit."""
+    with flight(tmp_path) as (station, sim, autopilot, recording):
+        hovering(station)
+        sim.send_signal(signal.SIGSTOP)
+        autopilot.terminate()
+        out, err = autopilot.communicate(timeout=20)  # a bound, far below the link timeout
+    assert autopilot.returncode == 0, err
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["ended"] == "stopped"
     assert read_recording(recording).complete
 
 
