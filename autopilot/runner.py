@@ -66,8 +66,6 @@ from simbridge.frames import Vec3
 from simbridge.hil import mavlink as mav
 from simbridge.rotors import Quad
 
-__all__ = ["MODES", "AutopilotConfig", "Flight", "fly_mission"]
-
 AUTO_ARM_AFTER_S = 0.2  # --auto-start: arm once the sensors have been healthy this long
 RESTING_PHASES = (Phase.DISARMED, Phase.ARMED, Phase.LANDED)  # the estimator may assume rest
 

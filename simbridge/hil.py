@@ -29,7 +29,6 @@ from simbridge.frames import (
 )
 from simbridge.sensor_noise import SensorErrors
 from simbridge.sensors import SENSORS, Frame, int16, mavlink
-from simbridge.sensors.esc import RAD_S_TO_RPM  # noqa: F401 (ESC telemetry's unit, for its readers)
 from simbridge.sim_state import VehicleState
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 from simbridge.wire import PacketSequence, WirePacker

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -92,14 +93,17 @@ def test_nan_and_inf_are_refused_in_every_item_form_and_coordinate():
 @pytest.mark.parametrize("flood", [500])
 def test_a_flood_of_unknown_parameter_names_is_explained_once_a_while(flood):
     with vehicle(speedup="1") as (gs, _, _):
+        started = time.monotonic()
         for k in range(flood):
             gs.conn.mav.param_set_send(
                 1, 1, f"NO_SUCH_{k}".encode(), 1.0, mav.MAV_PARAM_TYPE_REAL32
             )
         # answered after every one of them: what they caused has arrived
         assert gs.set_param("MIS_TAKEOFF_ALT", 1.5) == 1.5
+        flood_s = time.monotonic() - started
         unknown = [t for t in gs.progress.texts if t.startswith("unknown parameter")]
-        assert 1 <= len(unknown) <= 3, unknown  # one per 5 s while the flood lasts
+        # one per 5 s while the flood lasts (however long a busy machine makes it), not 500
+        assert 1 <= len(unknown) <= 2 + flood_s // 5.0, (unknown, flood_s)
         assert unknown[0] == "unknown parameter NO_SUCH_0"
         # a refusal of another kind is still explained at once
         assert gs.set_param("MPC_XY_CRUISE", 1000.0) == 0.5

@@ -65,11 +65,17 @@ def flight(
     finally:
         with contextlib.suppress(ProcessLookupError):
             sim.send_signal(signal.SIGCONT)
-        if autopilot.poll() is None:
-            autopilot.terminate()
-        autopilot.communicate(timeout=30)
-        finish(sim)
-        station.close()
+        try:
+            if autopilot.poll() is None:
+                autopilot.terminate()
+            try:
+                autopilot.communicate(timeout=30)
+            except subprocess.TimeoutExpired:
+                autopilot.kill()
+                autopilot.communicate()
+        finally:  # nothing this test started outlives it
+            finish(sim)
+            station.close()
 
 
 def hovering(station: GroundStation) -> None:

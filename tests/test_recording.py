@@ -21,7 +21,7 @@ from autopilot.commander.mission_items import Home, plan_steps
 from autopilot.recording.flight_recorder import FlightRecorder
 from autopilot.recording.record_options import RecordOptions
 from autopilot.recording.scene import LABEL_LIFT_M
-from autopilot.runner import MODES
+from autopilot.summary import MODES
 from learner.flightlogs.blueprint_reader import read_views
 from learner.flightlogs.recording import (
     ENTITY_PATHS,

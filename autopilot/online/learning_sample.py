@@ -6,8 +6,8 @@ import math
 
 from autopilot.types import FlightState, Step
 from simbridge.frames import Vec3, frd_to_flu, quat_to_matrix, rotate
-from simbridge.hil import RAD_S_TO_RPM
 from simbridge.rotors import Quad
+from simbridge.sensors.esc import RAD_S_TO_RPM
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle
 
 

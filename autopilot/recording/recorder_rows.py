@@ -25,7 +25,7 @@ from learner.flightlogs.recording import (
     TRAJECTORY,
 )
 from simbridge.frames import quat_to_matrices
-from simbridge.hil import RAD_S_TO_RPM
+from simbridge.sensors.esc import RAD_S_TO_RPM
 from simbridge.vehicle import GRAVITY_M_S2
 
 

@@ -194,7 +194,7 @@ def _ended_landing(track: Path) -> bool:
     """The flight's last step was in the landing phase (its trajectory file)."""
     import numpy as np
 
-    from autopilot.runner import MODES
+    from autopilot.summary import MODES
 
     if not track.exists():
         return False

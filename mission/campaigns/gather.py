@@ -11,9 +11,9 @@ import yaml
 from tqdm import tqdm
 
 from autopilot.commander.mission_items import Home, waypoint_items
-from autopilot.flight_config import Flight
+from autopilot.flight_config import AutopilotConfig, Flight
 from autopilot.params import MODEL_NAMES, ParamStore
-from autopilot.runner import AutopilotConfig, fly_mission
+from autopilot.runner import fly_mission
 from autopilot.simlink import LOST
 from learner.dataset import save_dataset
 from mission.campaigns.sampling import thesis_waypoints

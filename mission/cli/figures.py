@@ -10,11 +10,21 @@ def add_parser(sub: Any) -> None:
     from mission.campaigns.figures import SOURCES
 
     names = ",".join(s.name for s in SOURCES)
+
+    def sources(text: str) -> list[str]:
+        asked = text.split(",")
+        unknown = [n for n in asked if n not in names.split(",")]
+        if unknown:
+            raise argparse.ArgumentTypeError(f"{','.join(unknown)}: choose from {names}")
+        return asked
+
     p = sub.add_parser(
         "figures",
         help="regenerate docs/results/*.json and the figures README.md and docs/ quote",
     )
-    p.add_argument("--only", help=f"comma-separated sources (default: all of {names})")
+    p.add_argument(
+        "--only", type=sources, help=f"comma-separated sources (default: all of {names})"
+    )
     p.add_argument(
         "--rewrite-only",
         action="store_true",
@@ -26,5 +36,4 @@ def add_parser(sub: Any) -> None:
 def cmd_figures(args: argparse.Namespace) -> int:
     from mission.campaigns.figures import run_figures
 
-    names = args.only.split(",") if args.only else None
-    return run_figures(names, args.rewrite_only)
+    return run_figures(args.only, args.rewrite_only)
