@@ -40,6 +40,8 @@ class AutopilotConfig:
     max_flight_s: float = DEFAULT_MAX_FLIGHT_S
     should_stop: Callable[[], bool] = lambda: False  # a signal asked the loop to end
     on_event: Callable[[float, str], None] | None = None  # modes, arming, failsafes
+    # told once, when arming would first be accepted: the ground-station link's description
+    on_ready: Callable[[str], None] | None = None
     record_hz: float = 0.0  # > 0: record learning samples at this rate (thesis: 100 Hz)
     stop_after_samples: int | None = None  # end the flight once this many are recorded
     on_sample: Callable[[int], None] | None = None  # told the count of recorded samples

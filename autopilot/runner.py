@@ -84,6 +84,7 @@ class LoopState:
     last_setpoint_z_m: float = 0.0
     schedule: SampleSchedule = SampleSchedule()
     drawn_plan: tuple | None = None  # the plan the recording shows
+    landed: CommanderState | None = None  # a long run's flight that has landed, until closed
 
 
 @dataclass
@@ -152,8 +153,9 @@ def _open(config: AutopilotConfig, trace: FlightTrace) -> Parts:
 
     gcs = GcsLink(list(config.gcs_urls), config.signing)
     station = GroundStation(
-        gcs, config.params, identity_named(config.identity), config.origin, on_event
-    )
+        gcs, config.params, identity_named(config.identity), config.origin, on_event,
+        on_ready=config.on_ready or (lambda text: None),
+    )  # fmt: skip
     # before the link: the simulator's clock runs from the connection to the first reply
     gc.collect()
     gc.freeze()  # what exists now (modules, models, the world) is never scanned again
@@ -345,6 +347,28 @@ def _report(
     p.trace.rows.append((t, *pos, *v, zd, true_height, MODES.index(s.cmd.phase)))
 
 
+def _bound_trace(p: Parts, s: LoopState, t: float) -> None:
+    """A run that outlives its flights (no exit after landing: `sitl`) keeps each flight's
+    figures, not its steps: once it has landed and settled, or is armed again first (a
+    ground station flying missions back to back), or was disarmed without a landing."""
+    phase, trace = s.cmd.phase, p.trace
+    if p.config.exit_after_landing:
+        return
+    if phase == Phase.LANDED and s.landed is None:
+        s.landed = s.cmd  # the flight's own plan says where it meant to land
+    ended = s.landed or (s.cmd if phase == Phase.DISARMED and trace.flew() else None)
+    if ended is None:
+        if phase in (Phase.DISARMED, Phase.LANDED):
+            trace.trim_idle()
+        return
+    settled = t - (ended.touchdown_s or t) >= p.config.settle_after_landing_s
+    if phase == Phase.LANDED and not settled:
+        return
+    figures = flight_figures(trace, trace_log(trace), ended, p.resting_height_m, 0.0, p.nav)
+    trace.close_flight({k: v for k, v in figures.items() if k not in ("wall_s", "rtf")})
+    s.landed = None
+
+
 def _ended(config: AutopilotConfig, cmd: CommanderState, t: float) -> str | None:
     """Why the flight ends after this step, or None."""
     if (
@@ -397,6 +421,7 @@ def _step(p: Parts, s: LoopState) -> str | None:
     if _sample(p, s, t, step, estimate, cmd.setpoint, applied, flying):
         return "enough samples"
     _report(p, s, t, step, estimate, cmd, applied, in_the_air, inp)
+    _bound_trace(p, s, t)
     # what the ground stations asked since, and the failsafes: for the next step (a real
     # autopilot's commander runs beside its control loop, not in it)
     s.cmd = p.station.before_step(s.cmd, inp)
@@ -414,10 +439,12 @@ def _summary(
         model=p.tuning.model.name,
         malformed=p.link.malformed,
         unknown=p.link.unknown,
-        gcs=p.gcs.counters.as_dict(),
+        # heartbeats_kept: sent on the wall clock while the loop stalled
+        gcs={**p.gcs.counters.as_dict(), "heartbeats_kept": p.gcs.keepalive.resent},
         mission_items=len(p.station.items),
         touchdown_declared_s=s.cmd.touchdown_s,
         failsafes=p.trace.failsafes,
+        **({"flights": p.trace.flights} if p.trace.flights else {}),
         **online_summary,
     )
     return log, summary
@@ -444,7 +471,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         wall = time.perf_counter() - wall0
         p.link.close()
         online_summary = p.online.close()
-        p.station.save_signing(time.monotonic())
+        p.gcs.save_signing(time.monotonic())
         p.gcs.close()
         if sys.exc_info()[0] is not None:  # an exception on its way out ended the flight
             p.recorder.close("interrupted")

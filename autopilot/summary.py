@@ -13,6 +13,8 @@ from autopilot.metrics import COLUMNS, flight_metrics, ge_error_metrics, traject
 from autopilot.nav_metrics import estimator_metrics
 
 MODES = [p.value for p in Phase]
+# What a run that outlives its flights (`sitl`) keeps of its steps on the ground: 10 s at 250 Hz
+IDLE_ROWS_KEPT = 2500
 
 
 @dataclass
@@ -27,6 +29,27 @@ class FlightTrace:
     nav_errors: list[tuple[float, ...]] = field(default_factory=list)  # in the air
     samples: list[tuple[float, ...]] = field(default_factory=list)  # learner.dataset.COLUMNS
     failsafes: list[str] = field(default_factory=list)
+    flights: list[dict[str, Any]] = field(default_factory=list)  # a long run's, each landed one's
+
+    def flew(self) -> bool:
+        """The controller ran since the trace began: the rotors were on."""
+        return bool(self.timings)
+
+    def close_flight(self, figures: dict[str, Any]) -> None:
+        """A long run's flight is over: its figures are kept, its steps let go, so that a
+        `sitl` flying for hours stays the size it was."""
+        self.flights.append({**figures, "failsafes": list(self.failsafes)})
+        for steps in (
+            self.rows, self.timings, self.step_timings, self.correction_timings, self.ge_pairs,
+            self.nav_errors, self.failsafes,
+        ):  # fmt: skip
+            steps.clear()
+
+    def trim_idle(self) -> None:
+        """On the ground between flights: only the last IDLE_ROWS_KEPT steps (amortised)."""
+        for steps in (self.rows, self.correction_timings):
+            if len(steps) > 2 * IDLE_ROWS_KEPT:
+                del steps[:-IDLE_ROWS_KEPT]
 
 
 def landing_target_xy(cmd: CommanderState) -> tuple[float, float] | None:

@@ -15,6 +15,7 @@ from typing import Any
 
 from autopilot.commander.mission_items import Home
 from autopilot.request import NO_PARAMS_FILE, FlightRequest
+from autopilot.simlink import LOST
 from mission.gcs_client import GroundStation, GroundStationError, VehicleEnded
 from mission.plans.formats import load_mission_file
 from mission.recordings import default_recording_path
@@ -97,6 +98,9 @@ def _flight_request(
     return dataclasses.replace(request, mission=mission_path, auto_start=True, no_gcs=True)
 
 
+LINK_RETRIES = 1  # a lost simulator link is flown again once
+
+
 def fly(
     mission_path: Path,
     world: str = "default",
@@ -109,6 +113,7 @@ def fly(
     say: Callable[[str], None] = lambda text: None,
     sim_options: Sequence[str] = (),
     autopilot_options: Sequence[str] = (),
+    link_retries: int = LINK_RETRIES,
     **asked: Any,
 ) -> dict[str, Any]:
     """Fly; returns the autopilot's summary with the simulator's last line.
@@ -119,7 +124,10 @@ def fly(
     uploads the mission, arms, starts it and waits for the disarm, as a user's would.
     Otherwise the autopilot loads the mission and arms by itself at a fixed simulated time,
     so that the same flight gives the same trajectory. `record`: True records to a new file
-    in the logs folder, a path records there, False not at all.
+    in the logs folder, a path records there, False not at all. A flight whose simulator
+    link was lost (its process gone, or silent past the link timeout) is flown again up to
+    `link_retries` times: a loaded machine must not end a campaign, and lockstep makes the
+    retry the same flight.
     """
     # refuse a bad world, request or mission before starting anything
     world_obj = load_world(world)
@@ -128,6 +136,26 @@ def fly(
     )
     o = world_obj.origin
     doc = load_mission_file(mission_path, Home(o.lat_deg, o.lon_deg, o.alt_m))
+    for attempt in range(link_retries + 1):
+        summary = _fly_once(request, doc, world, via_gcs, speedup, start, sim_options, say)
+        ended = str(summary.get("ended", ""))
+        if not ended.startswith(LOST) or attempt == link_retries:
+            return summary
+        say(f"{ended}: flying it again")
+    raise AssertionError("unreachable")
+
+
+def _fly_once(
+    request: FlightRequest,
+    doc: Any,
+    world: str,
+    via_gcs: bool,
+    speedup: str,
+    start: str | None,
+    sim_options: Sequence[str],
+    say: Callable[[str], None],
+) -> dict[str, Any]:
+    """One flight: the simulator, the autopilot, and the ground station when `via_gcs`."""
     wall0 = time.perf_counter()
     station = GroundStation("udpin:127.0.0.1:0") if via_gcs else None
     # both ends are ours: a Unix-domain socket, and the two processes start side by side

@@ -67,8 +67,11 @@ class GroundStation:
     # --- the receive loop ------------------------------------------------------------------
 
     def _heartbeat(self) -> None:
+        """1 Hz, from the first moment there is someone to send to (listening on udpin, the
+        vehicle's address is known once it has been heard: a beat before is lost)."""
         now = time.monotonic()
-        if now >= self.heartbeat_due:
+        listening = getattr(self.conn, "udp_server", False)  # pymavlink's udpin
+        if now >= self.heartbeat_due and (not listening or self.conn.clients):
             self.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
             self.heartbeat_due = now + 1.0
 
@@ -76,6 +79,7 @@ class GroundStation:
         """The next message from the vehicle (tracking progress on the way), or None."""
         self._heartbeat()
         m = self.conn.recv_match(blocking=True, timeout=min(timeout_s, 0.2))
+        self._heartbeat()  # at once when this was the first message heard
         if m is None or m.get_srcSystem() != self.target[0]:
             return None
         kind = m.get_type()

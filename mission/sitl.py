@@ -8,6 +8,7 @@ import dataclasses
 import signal
 import subprocess
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -15,6 +16,7 @@ from pathlib import Path
 import yaml
 
 from autopilot.request import FlightRequest
+from mission.cli.autopilot import READY
 from mission.fly import request_command
 from simbridge.config import ConfigError
 from simbridge.launch import start_sim, supervised_options
@@ -85,12 +87,20 @@ def run_sitl(
             record_world=str(world_path),  # ignored when not recording
             vehicle=vehicle or world_obj.vehicle,
         )
-        autopilot = subprocess.Popen(request_command(request), **supervised_options())
+        autopilot = subprocess.Popen(
+            request_command(request),
+            stdout=subprocess.PIPE,
+            text=True,
+            bufsize=1,
+            **supervised_options(),
+        )
         say(f"groundfx sitl: simulator on tcp:127.0.0.1:{port} ({world_path}, speed {speedup})")
         say(f"groundfx sitl: vehicle 1 at {o.lat_deg:.7f}, {o.lon_deg:.7f}, {o.alt_m:g} m")
         for url in request.out:
             say(f"groundfx sitl: ground stations: {connect_hint(url)}")
-        say("groundfx sitl: Ctrl-C to stop")
+        say("groundfx sitl: starting (Ctrl-C to stop)")
+        relay = threading.Thread(target=relay_output, args=(autopilot, say), daemon=True)
+        relay.start()
         stop: list[int] = []
         previous = {
             sig: signal.signal(sig, lambda signum, frame: stop.append(signum))
@@ -101,6 +111,7 @@ def run_sitl(
                 time.sleep(0.05)
         finally:
             stop_in_order(autopilot, sim)
+            relay.join(timeout=STOP_WAIT_S)
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
         if stop:
@@ -110,17 +121,30 @@ def run_sitl(
         return 0 if autopilot.returncode == 0 else (autopilot.returncode or 1)
 
 
+def relay_output(autopilot: subprocess.Popen[str], say: Callable[[str], None]) -> None:
+    """The autopilot's output, line by line; its ready line becomes sitl's."""
+    assert autopilot.stdout is not None
+    for line in autopilot.stdout:
+        text = line.rstrip("\n")
+        if text.startswith(READY):
+            say(f"groundfx sitl: ready: {text[len(READY) :].strip()} (Ctrl-C to stop)")
+        else:
+            say(text)
+
+
 def stop_in_order(autopilot: subprocess.Popen, sim: subprocess.Popen[str]) -> None:
     """The autopilot first (it closes its recording and links), then the simulator, which
-    waits for the next autopilot until told to stop; each killed after STOP_WAIT_S."""
+    waits for the next autopilot until told to stop; each killed after STOP_WAIT_S. The
+    autopilot's output is another thread's to read: it is waited for, not communicated."""
     for proc, sig in ((autopilot, signal.SIGINT), (sim, signal.SIGTERM)):
         if proc.poll() is None:
             proc.send_signal(sig)
+        finish = proc.wait if proc is autopilot else proc.communicate
         try:
-            proc.communicate(timeout=STOP_WAIT_S)
+            finish(timeout=STOP_WAIT_S)
         except subprocess.TimeoutExpired:
             proc.kill()
-            proc.communicate()
+            finish()
 
 
 def connect_hint(url: str) -> str:

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
@@ -58,3 +59,15 @@ def ideal_sensor_noise() -> dict[str, float]:
     from simbridge.sensor_noise import SensorNoise
 
     return {k: v for k, v in dataclasses.asdict(SensorNoise.ideal()).items() if k != "seed"}
+
+
+@contextlib.contextmanager
+def cpu_bound(count: int = 2) -> Iterator[None]:
+    """`count` processes that only burn CPU, beside what the block runs: a busy machine."""
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(count)]
+    try:
+        yield
+    finally:
+        for burner in burners:
+            burner.kill()
+            burner.wait()

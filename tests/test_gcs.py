@@ -4,12 +4,11 @@ missions up and down, refusals, hostile input, the link-loss failsafe, the geofe
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import os
-import random
 import signal
 import socket
-import struct
 import subprocess
 import sys
 import threading
@@ -29,7 +28,8 @@ from mission.gcs_client import GroundStation, GroundStationError
 from mission.plans.formats import load_mission_file
 from simbridge.launch import finish, start_sim
 from simbridge.world import load_world
-from tests.helpers import REPO
+from tests.helpers import REPO, cpu_bound
+from tests.hostile_frames import flood
 
 SQUARE = REPO / "mission" / "examples" / "square.plan"
 WORLD_ORIGIN = load_world("default").origin
@@ -108,8 +108,13 @@ def test_parameters_set_read_refuse_and_persist(tmp_path):
         gs.conn.mav.file_transfer_protocol_send(0, 1, 1, [0] * 251)
         nak = gs.wait_for("FTP NAK", lambda m: m.get_type() == "FILE_TRANSFER_PROTOCOL", 3.0)
         assert nak.payload[3] == 129
-    with vehicle("--params-file", str(params), speedup="1") as (gs, _, _):
+    with vehicle("--params-file", str(params), speedup="1") as (gs, autopilot, _):
         assert gs.get_param("MIS_TAKEOFF_ALT").param_value == 1.5  # persisted across restarts
+        autopilot.terminate()
+        _, err = autopilot.communicate(timeout=30)
+    # and said so, never silently: the file, the names, how to start from the defaults
+    assert f"1 parameter from {params} (set over MAVLink in an earlier run: MIS_TAKEOFF_ALT)" in err
+    assert "--params-file none" in err
 
 
 def test_a_mission_downloads_identical_and_a_bad_one_leaves_it_in_place():
@@ -156,39 +161,44 @@ def test_the_square_mission_flies_to_the_end_through_10000_hostile_frames():
     assert counters["malformed"] > 0 and counters["unknown"] > 0 and counters["wrong_target"] > 0
 
 
-def flood(port: int, sent: list[int], stop: threading.Event) -> None:
-    """Random and mutated frames from a stranger (system 200): garbage, bad CRC, truncated,
-    unknown ids, commands for another system, out-of-range values."""
-    rng = random.Random(7)
-    packer = mav.MAVLink(None, srcSystem=200, srcComponent=1)
-    valid = [
-        mav.MAVLink_command_long_message(42, 1, 400, 0, 0, 21196, 0, 0, 0, 0, 0),  # other system
-        mav.MAVLink_command_long_message(1, 99, 400, 0, 0, 21196, 0, 0, 0, 0, 0),  # other comp
-        mav.MAVLink_param_set_message(1, 1, b"MIS_TAKEOFF_ALT", 1e30, 9),  # out of range
-        mav.MAVLink_param_set_message(1, 1, b"NO_SUCH_PARAM", 1.0, 9),
-        mav.MAVLink_param_request_read_message(1, 1, b"", 30000),
-        mav.MAVLink_mission_set_current_message(1, 1, 9999),
-        mav.MAVLink_command_long_message(1, 1, 178, 0, 1, -5.0, 0, 0, 0, 0, 0),  # bad speed
-        mav.MAVLink_set_position_target_local_ned_message(
-            0, 1, 1, 1, 0, float("nan"), 1e30, 0, 0, 0, 0, 0, 0, 0, 0, 0
-        ),
-    ]
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        while not stop.is_set() and sent[0] < 12_000:
-            frame = bytearray(rng.choice(valid).pack(packer))
-            kind = sent[0] % 5
-            if kind == 0:
-                frame = bytearray(rng.randbytes(rng.randint(1, 300)))
-            elif kind == 1:
-                frame[rng.randrange(10, len(frame))] ^= 0xFF  # bad CRC
-            elif kind == 2:
-                frame = frame[: rng.randrange(1, len(frame))]  # truncated
-            elif kind == 3:  # an id outside the dialect, CRC as if it were known
-                frame[7:10] = struct.pack("<I", 0x00FFF0 + rng.randrange(8))[:3]
-            sock.sendto(bytes(frame), ("127.0.0.1", port))
-            sent[0] += 1
-            if sent[0] % 200 == 0:
-                time.sleep(0.002)  # about 10^5 frames per second at most
+def test_heartbeats_go_on_through_a_flood_beside_two_cpu_bound_processes():
+    """A hover through 5,000 hostile frames on a busy machine: the ground station hears a
+    heartbeat at least every 1.5 s of wall time (MAVSDK and QGroundControl call a link lost
+    after about 3 s), and the vehicle lands."""
+    with vehicle("--param", "MIS_TAKEOFF_ALT=1", speedup="1") as (gs, autopilot, listen_port):
+        gs.wait_armable()
+        gs.require(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1, what="arming")
+        gs.require(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, float("nan"), 0, 0, 1.0, what="take-off")
+        gs.wait_for(
+            "the hover at 1 m",
+            lambda m: m.get_type() == "GLOBAL_POSITION_INT" and m.relative_alt > 950,
+            30.0,
+        )
+        heard: list[float] = []
+        with cpu_bound(2):
+            sender = subprocess.Popen(
+                [sys.executable, "-m", "tests.hostile_frames", str(listen_port), "5000", "3"],
+                stdout=subprocess.PIPE,
+                text=True,
+                cwd=REPO,
+            )
+            try:
+                while sender.poll() is None or len(heard) < 3:
+                    m = gs.receive(0.2)
+                    if m is not None and m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 1:
+                        heard.append(time.monotonic())
+            finally:
+                sender.kill()
+                out, _ = sender.communicate()
+        gs.require(mav.MAV_CMD_NAV_LAND, what="landing")
+        gs.wait_for("disarm after landing", lambda m: not gs.progress.armed, 60.0)
+        summary = summary_of(autopilot)
+    assert int(out) == 5000
+    gaps = [b - a for a, b in itertools.pairwise(heard)]
+    assert max(gaps) <= 1.5, f"heartbeat gaps {[round(g, 2) for g in gaps]} s"
+    print(f"heartbeat gaps at most {max(gaps):.2f} s; {summary['gcs']}")
+    assert summary["landed"], summary
+    assert summary["gcs"]["dropped"] + summary["gcs"]["invalid"] >= 2_500, summary["gcs"]
 
 
 def test_losing_the_ground_station_in_flight_lands():
@@ -330,6 +340,10 @@ def test_sitl_takes_off_flies_offboard_and_a_fence_breach_returns_home():
         station.close()
     assert sitl.returncode == 0, err
     assert f"udp 127.0.0.1:{port}" in out and "Ctrl-C" in out
+    # one line once arming would be accepted: where ground stations connect, what it claims
+    ready = [line for line in out.splitlines() if line.startswith("groundfx sitl: ready:")]
+    assert len(ready) == 1, out
+    assert f"udpout:127.0.0.1:{port}; px4 identity; signing off" in ready[0], ready
     assert out.strip().splitlines()[-1] == "groundfx sitl: stopped by SIGINT"
 
 

@@ -9,6 +9,7 @@ import json
 import os
 import signal
 import subprocess
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -25,6 +26,7 @@ from mission.plans.formats import load_mission_file
 from simbridge.config import ConfigError
 from simbridge.launch import finish, start_sim
 from simbridge.world import load_world
+from tests.helpers import recorded_s
 
 WORLD_ORIGIN = load_world("default").origin
 ORIGIN = Home(WORLD_ORIGIN.lat_deg, WORLD_ORIGIN.lon_deg, WORLD_ORIGIN.alt_m)
@@ -90,9 +92,15 @@ def test_a_simulator_stopped_mid_hover_is_waited_for_and_the_flight_lands(tmp_pa
     with flight(tmp_path) as (station, sim, autopilot, recording):
         hovering(station)
         sim.send_signal(signal.SIGSTOP)
-        resume_at = time.monotonic() + STOPPED_S
+        stopped_at = time.monotonic()
+        resume_at = stopped_at + STOPPED_S
+        heartbeats = []
         while time.monotonic() < resume_at:  # the station stays heard meanwhile
-            station.receive(resume_at - time.monotonic())
+            m = station.receive(resume_at - time.monotonic())
+            if m is not None and m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 1:
+                heartbeats.append(time.monotonic() - stopped_at)
+        # and the vehicle is heard too: its heartbeats go on while its loop waits
+        assert len(heartbeats) >= 2 and heartbeats[-1] > STOPPED_S - 1.5, heartbeats
         # it was stopped in the air: hovering, or already landing on a slow machine
         assert station.progress.landed_state in (IN_AIR, LANDING)
         sim.send_signal(signal.SIGCONT)
@@ -146,3 +154,44 @@ def test_a_simulator_that_fails_at_start_ends_fly_with_its_reason(tmp_path):
     mission.write_text(HOVER)
     with pytest.raises(ConfigError, match=r"groundfx sim exited with code 2: .*--sensor-seed"):
         fly(mission, via_gcs=False, record=False, sim_options=["--sensor-seed=-1"])
+
+
+def simulators_started_by_this_test() -> list[int]:
+    """This process's children that are a `groundfx sim` (Linux's /proc)."""
+    pid = os.getpid()
+    children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+    found = []
+    for child in children:
+        with contextlib.suppress(OSError):
+            argv = Path(f"/proc/{child}/cmdline").read_bytes().split(b"\0")
+            if b"sim" in argv and b"autopilot" not in argv:
+                found.append(int(child))
+    return found
+
+
+def test_a_campaign_flight_whose_simulator_dies_is_flown_again_to_the_same_trajectory(tmp_path):
+    """`fly` (every campaign's flight: gather, trials, replays, online evaluation) flies a lost
+    link again once; lockstep makes the second flight the one an undisturbed run flies."""
+    mission = tmp_path / "hover.yaml"
+    mission.write_text(HOVER)
+    recording = tmp_path / "first.rrd"
+    killed: list[int] = []
+
+    def kill_the_first_simulator_in_flight() -> None:
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline and recorded_s(recording) < 1.0:
+            time.sleep(0.05)
+        for pid in simulators_started_by_this_test()[:1]:
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+
+    said: list[str] = []
+    killer = threading.Thread(target=kill_the_first_simulator_in_flight, daemon=True)
+    killer.start()
+    summary = fly(mission, via_gcs=False, record=recording, speedup="2", say=said.append)
+    killer.join(timeout=5)
+    assert killed, "the simulator was never seen in flight"
+    assert any(text.startswith("lost the simulator link") for text in said), said
+    assert summary["landed"], summary
+    undisturbed = fly(mission, via_gcs=False, record=False)
+    assert summary["trajectory_sha256"] == undisturbed["trajectory_sha256"]

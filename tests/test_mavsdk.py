@@ -198,6 +198,39 @@ def after(before: Callable[[Any], bool], then: Callable[[Any], bool]) -> Callabl
     return ok
 
 
+async def arm_as_soon_as_healthy(port: int) -> list[Any]:
+    """Connect at once, wait for health as MAVSDK's examples do (global position and home
+    OK), arm at that moment: what every health value said until then."""
+    config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+    async with Mavsdk(config) as sdk:
+        await within("connect", 5, sdk.add_any_connection(f"udpout://127.0.0.1:{port}"))
+        system = await within("discovery", 15, sdk.first_autopilot(timeout_s=10.0))
+        assert system is not None, "MAVSDK found no autopilot within 10 s"
+        telemetry, action = TelemetryAsync(system), ActionAsync(system)
+        try:
+            _, seen = await first(
+                "health: global position and home",
+                15,
+                telemetry.subscribe_health(),
+                lambda h: h.is_global_position_ok and h.is_home_position_ok,
+            )
+            await within("arm", 5, action.arm())  # raises if refused
+            await within("disarm", 5, action.disarm())
+            return seen
+        finally:
+            telemetry.destroy()
+            action.destroy()
+
+
+def test_mavsdk_health_says_ready_only_when_arming_is_accepted(vehicle):
+    """Health (position, pre-arm) is what the pre-arm checks say: a client that arms the
+    moment MAVSDK reports the position healthy is never refused."""
+    port = free_udp_port()
+    vehicle("px4", f"udpin:127.0.0.1:{port}")
+    seen = asyncio.run(arm_as_soon_as_healthy(port))
+    assert seen  # and arming was accepted: arm() raises on a refusal
+
+
 def is_flying(state: LandedState) -> bool:
     return state in (LandedState.TAKING_OFF, LandedState.IN_AIR, LandedState.LANDING)
 

@@ -123,10 +123,26 @@ def set_current(state: CommanderState, seq: int) -> tuple[CommanderState, Verdic
     ), OK
 
 
-def not_ready(time_s: float, height_m: float, resting_height_m: float) -> str | None:
-    """Why the pre-arm checks fail, or None when they pass."""
-    if time_s < 0.2:
+SENSORS_SETTLE_S = 0.2  # simulated time the estimator's sensors take to give a position
+
+
+def position_problem(time_s: float, position_lost: str | None) -> str | None:
+    """Why the estimator has no position to fly on, or None: what ground stations show as
+    the position's health, and the first of the pre-arm checks."""
+    if time_s < SENSORS_SETTLE_S:
         return "sensors not ready"
+    if position_lost is not None:
+        return f"no position: {position_lost}"
+    return None
+
+
+def not_ready(
+    time_s: float, height_m: float, resting_height_m: float, position_lost: str | None = None
+) -> str | None:
+    """Why the pre-arm checks fail, or None when they pass (arming would be accepted)."""
+    problem = position_problem(time_s, position_lost)
+    if problem is not None:
+        return problem
     if height_m > resting_height_m + 0.02:
         return "not on the ground"
     return None

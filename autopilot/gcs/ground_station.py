@@ -29,7 +29,6 @@ from simbridge.hil import mavlink as mav
 
 DENIED, UNSUPPORTED = mav.MAV_RESULT_DENIED, mav.MAV_RESULT_UNSUPPORTED
 FORCE_MAGIC = 21196  # ARM_DISARM param2: arm or disarm whatever the checks say
-SIGNING_SAVE_S = 10.0  # wall seconds between saves of the signing timestamp
 GUIDED_ITEM = 2  # MISSION_ITEM.current 2: ArduPilot's guided target, not a mission item
 
 
@@ -41,6 +40,11 @@ class StepInput:
     height_m: float
     resting_height_m: float
     position_lost: str | None = None  # the estimator's word: which position source went quiet
+
+    def not_ready(self) -> str | None:
+        """Why arming would be refused; also what SYS_STATUS's pre-arm health says."""
+        s = self
+        return requests.not_ready(s.time_s, s.height_m, s.resting_height_m, s.position_lost)
 
 
 # a command's handler: the new state and the verdict to ack with (None: it answered itself)
@@ -55,11 +59,13 @@ class GroundStation:
     identity: Identity
     origin: tuple[float, float, float]
     on_event: Callable[[float, str], None] = lambda t, text: None
+    # told once, the first time arming would be accepted: where ground stations connect
+    on_ready: Callable[[str], None] = lambda text: None
+    ready_told: bool = False
     items: tuple[MissionItem, ...] = ()
     streams: telemetry.Streams = field(default_factory=telemetry.Streams)
     failsafes: Failsafes = field(default_factory=Failsafes)
     initial_home_m: tuple[float, float, float] | None = None
-    signing_saved_wall_s: float = 0.0
     last_mission_current: tuple[int, int, int] | None = None
     surface_z: float | None = None  # local z of the surface under the vehicle on the ground
     last_status: tuple[Any, ...] | None = None
@@ -102,21 +108,21 @@ class GroundStation:
         if not self.link.endpoints:
             return
         snap = self._snapshot(cmd, inp)
+        if snap.ready and not self.ready_told:
+            self.ready_told = True
+            self.on_event(inp.time_s, "ready to arm")
+            self.on_ready(self.link.describe(f"{self.identity.name} identity"))
         due = self.streams.due(inp.time_s)
-        status = (snap.phase, snap.mode, snap.armed)
+        status = (snap.phase, snap.mode, snap.armed, snap.ready, snap.position_ok)
         if status != self.last_status:  # tell at once, not at the next 1 Hz heartbeat
             self.last_status = status
-            due = [*due, "HEARTBEAT", "EXTENDED_SYS_STATE"]
+            due = [*due, "HEARTBEAT", "EXTENDED_SYS_STATE", "SYS_STATUS"]
         for name in dict.fromkeys(due):
             self._send_named(name, snap, cmd, inp)
         current = telemetry.mission_current(cmd, len(self.items))
         if current != self.last_mission_current:
             self._send_named("MISSION_CURRENT", snap, cmd, inp)
-        if (
-            self.link.signing is not None
-            and inp.wall_s - self.signing_saved_wall_s > SIGNING_SAVE_S
-        ):
-            self.save_signing(inp.wall_s)
+        self.link.keep_signing(inp.wall_s)
 
     def _first_position(self, inp: StepInput) -> None:
         """Home until one is set: where the vehicle was at the first step."""
@@ -126,11 +132,6 @@ class GroundStation:
     def _home_m(self, cmd: CommanderState) -> Vec3:
         """Where it armed, else where it was at the first step, else the home given (origin)."""
         return cmd.home_m or self.initial_home_m or (0.0, 0.0, 0.0)
-
-    def save_signing(self, wall_s: float) -> None:
-        if self.link.signing is not None:
-            self.link.signing.save(self.link.signing_timestamp)
-            self.signing_saved_wall_s = wall_s
 
     # --- sending ---------------------------------------------------------------------------
 
@@ -158,7 +159,8 @@ class GroundStation:
             phase=cmd.phase,
             mode=cmd.mode,
             armed=cmd.phase not in (Phase.DISARMED, Phase.LANDED),
-            ready=requests.not_ready(inp.time_s, inp.height_m, inp.resting_height_m) is None,
+            ready=inp.not_ready() is None,
+            position_ok=requests.position_problem(inp.time_s, inp.position_lost) is None,
             identity=self.identity,
             fence_on=self.params.geofence() != Geofence(),
             fence_breached=self.failsafes.fence_breached,
@@ -289,7 +291,7 @@ class GroundStation:
         force = round(m.param2) == FORCE_MAGIC if math.isfinite(m.param2) else False
         t = inp.time_s
         if m.param1 == 1.0:
-            ready = requests.not_ready(inp.time_s, inp.height_m, inp.resting_height_m)
+            ready = inp.not_ready()
             cmd, verdict = requests.arm(cmd, t, inp.state.position_m, ready, force)
             if verdict.accepted:
                 self.on_event(t, "armed by the ground station")

@@ -8,7 +8,7 @@ to every peer. Reading never blocks: the flight loop polls between control steps
 Nothing a peer sends can stop the loop: frames that fail their CRC, truncated frames,
 unknown ids and garbage are counted and dropped; with signing on, unsigned and wrongly
 signed packets are counted and dropped; messages addressed to another system are counted
-and ignored.
+and ignored. Heartbeats keep going on the wall clock when the loop stalls (`keepalive`).
 """
 
 from __future__ import annotations
@@ -16,9 +16,11 @@ from __future__ import annotations
 import contextlib
 import errno
 import socket
+import threading
 from dataclasses import dataclass, field
 from typing import Any
 
+from autopilot.gcs.keepalive import Keepalive
 from autopilot.gcs.port_owner import port_owner
 from autopilot.gcs.signing import SignedMAVLink, Signing
 from simbridge.config import ConfigError
@@ -28,6 +30,7 @@ SCHEMES = ("udpout", "udpin", "tcpin", "udp")
 PEER_FORGET_S = 30.0  # a udpin peer silent this long is no longer sent to
 MAX_DATAGRAMS_PER_POLL = 256  # bounds the time one poll may take under a flood
 RECEIVE_BUFFER_BYTES = 4 << 20
+SIGNING_SAVE_S = 10.0  # wall seconds between saves of the signing timestamp
 
 
 def parse_url(url: str) -> tuple[str, str, int]:
@@ -101,6 +104,14 @@ class GcsLink:
         self.counters = Counters()
         self.packer = self._new_mavlink()
         self.endpoints = [self._open(url) for url in urls]
+        # the flight loop and the keepalive thread both send: one packer, one sequence
+        self._lock = threading.Lock()
+        self.heartbeat: mav.MAVLink_message | None = None  # the newest sent, and when
+        self.heartbeat_sent_s: float | None = None
+        self.signing_saved_s = 0.0
+        self.keepalive = Keepalive(lambda: self.heartbeat_sent_s, self._resend_heartbeat)
+        if self.endpoints:
+            self.keepalive.start()
 
     def _new_mavlink(self) -> mav.MAVLink:
         link = SignedMAVLink(None, srcSystem=self.sysid, srcComponent=self.compid)
@@ -146,7 +157,8 @@ class GcsLink:
         out: list[mav.MAVLink_message] = []
         for ep in self.endpoints:
             if ep.scheme == "tcpin":
-                self._poll_tcp(ep, out)
+                with self._lock:  # the client list is the sender's too
+                    self._poll_tcp(ep, out)
                 continue
             for _ in range(MAX_DATAGRAMS_PER_POLL):
                 try:
@@ -221,6 +233,20 @@ class GcsLink:
 
     def send(self, message: mav.MAVLink_message, wall_s: float) -> None:
         """Pack (and sign) once; send to every peer of every endpoint."""
+        with self._lock:
+            self._send(message, wall_s)
+            if message.get_msgId() == mav.MAVLINK_MSG_ID_HEARTBEAT:
+                self.heartbeat, self.heartbeat_sent_s = message, wall_s
+
+    def _resend_heartbeat(self, wall_s: float) -> bool:
+        with self._lock:
+            if self.heartbeat is None:
+                return False
+            self._send(self.heartbeat, wall_s)
+            self.heartbeat_sent_s = wall_s
+            return True
+
+    def _send(self, message: mav.MAVLink_message, wall_s: float) -> None:
         data = message.pack(self.packer)
         for ep in self.endpoints:
             if ep.scheme == "udpout":
@@ -252,7 +278,24 @@ class GcsLink:
     def signing_timestamp(self) -> int:
         return int(self.packer.signing.timestamp)
 
+    def keep_signing(self, wall_s: float) -> None:
+        """Save the signing timestamp now and then: a restart must never reuse one."""
+        if self.signing is not None and wall_s - self.signing_saved_s > SIGNING_SAVE_S:
+            self.save_signing(wall_s)
+
+    def save_signing(self, wall_s: float) -> None:
+        if self.signing is not None:
+            self.signing.save(self.signing_timestamp)
+            self.signing_saved_s = wall_s
+
+    def describe(self, *more: str) -> str:
+        """The link as a ground station meets it: its endpoints, and whether it signs."""
+        urls = ", ".join(ep.url for ep in self.endpoints)
+        signing = "on" if self.signing is not None else "off"
+        return "; ".join((f"ground stations {urls}", *more, f"signing {signing}"))
+
     def close(self) -> None:
+        self.keepalive.stop()
         for ep in self.endpoints:
             for client, _ in ep.clients:
                 client.close()

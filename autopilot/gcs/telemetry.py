@@ -52,8 +52,9 @@ class Snapshot:
     phase: Phase
     mode: FlightMode
     armed: bool
-    ready: bool  # pre-arm checks pass
+    ready: bool  # pre-arm checks pass: arming would be accepted
     identity: Identity
+    position_ok: bool = True  # the estimator has a position (MAVSDK: local and global OK)
     fence_on: bool = False  # a geofence limit is set
     fence_breached: bool = False
 
@@ -85,7 +86,9 @@ def sys_status(s: Snapshot, drop_rate_percent: float, errors: int) -> Any:
     # The geofence bit is healthy unless breached, present or not, as ArduPilot sends it:
     # MAVProxy announces "fence breach" when it is clear.
     present = SENSORS | PREARM | (FENCE if s.fence_on else 0)
-    health = SENSORS | (PREARM if s.ready else 0) | (0 if s.fence_breached else FENCE)
+    # MAVSDK reads its position health from the GPS bit, QGroundControl "ready" from PREARM
+    sensors = SENSORS if s.position_ok else SENSORS & ~mav.MAV_SYS_STATUS_SENSOR_GPS
+    health = sensors | (PREARM if s.ready else 0) | (0 if s.fence_breached else FENCE)
     return mav.MAVLink_sys_status_message(
         present, present, health,
         100, 4100, -1, -1, min(int(drop_rate_percent * 100), 10000), min(errors, 65535),

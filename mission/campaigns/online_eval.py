@@ -43,7 +43,6 @@ import yaml
 
 from autopilot.control.controller import THESIS_GAINS
 from autopilot.metrics import FAR_FROM_GROUND_M, NEAR_GROUND_M
-from autopilot.simlink import LOST
 from learner.flightlogs.readers import read_log
 from learner.model import load_model
 from learner.online.names import METHODS, NEEDS_BASIS, PROTECTING
@@ -63,8 +62,7 @@ SAME_M = 1e-5  # 0.01 mm: hold errors closer than this are the same
 # cushion its model mispredicts can take minutes to land on the thesis's PD: flights end
 # this long after the hold's nominal end.
 FLIGHT_S_AFTER_HOLD = 35.0
-LINK_LOST = LOST
-LINK_RETRIES = 2
+LINK_RETRIES = 2  # a flight whose simulator link was lost is flown again up to this often
 BASIS_NETWORK = "grounds"  # the packaged basis model (learner/basis.py)
 CONTROLLERS: dict[str, tuple[str, ...]] = {
     "thesis": tuple(f"{k}={v:g}" for k, v in THESIS_GAINS.items()),  # the thesis's PD (3.7)
@@ -121,23 +119,20 @@ def flight_summary(
     """One seeded flight's summary. A flight whose simulator link was lost (its process
     gone, or silent past the link timeout) is flown again, as the experiments' runner does:
     lockstep makes the retry the same flight."""
-    for _ in range(LINK_RETRIES + 1):
-        summary = fly(
-            mission,
-            str(world),
-            model,
-            rho=rho,
-            start=start,
-            network=network,
-            via_gcs=False,
-            record=False,
-            max_flight_s=max_flight_s(mission),
-            flight_log=flight_log,
-            autopilot_options=extra,
-        )
-        if not str(summary.get("ended", "")).startswith(LINK_LOST):
-            break
-    return summary
+    return fly(
+        mission,
+        str(world),
+        model,
+        rho=rho,
+        start=start,
+        network=network,
+        via_gcs=False,
+        record=False,
+        max_flight_s=max_flight_s(mission),
+        flight_log=flight_log,
+        autopilot_options=extra,
+        link_retries=LINK_RETRIES,
+    )
 
 
 def far_error_n(flight_log: Path, network: str | Path, world: Path, rho: float) -> float:

@@ -13,6 +13,8 @@ from typing import Any
 from autopilot.request import DEFAULT_GCS_URLS, NO_PARAMS_FILE, FlightRequest, add_options
 from simbridge.config import ConfigError
 
+READY = "groundfx autopilot: ready to arm:"  # the line `groundfx sitl` waits for
+
 
 def add_parser(sub: Any) -> None:
     p = sub.add_parser(
@@ -117,6 +119,16 @@ def _config(request: FlightRequest, should_stop: Any) -> Any:
             overrides["GFX_WP_TIMEOUT"] = doc.waypoint_timeout_s
     params_file = None if str(request.params_file) == NO_PARAMS_FILE else request.params_file
     params = ParamStore(params_file, overrides, request.identity)
+    if params.saved:  # never silently: a value set in an earlier run changes this one
+        names = ", ".join(sorted(params.saved))
+        print(
+            f"groundfx autopilot: {len(params.saved)} "
+            f"parameter{'s' if len(params.saved) != 1 else ''} from {params_file} "
+            f"(set over MAVLink in an earlier run: {names}); "
+            f"--params-file {NO_PARAMS_FILE} starts from the defaults",
+            file=sys.stderr,
+            flush=True,
+        )
     gcs_urls = () if request.no_gcs else (request.out or DEFAULT_GCS_URLS)
     signing = request.signing_key_file
     return AutopilotConfig(
@@ -132,6 +144,9 @@ def _config(request: FlightRequest, should_stop: Any) -> Any:
         gcs_urls=gcs_urls,
         signing=Signing(signing) if signing else None,
         should_stop=should_stop,
+        on_ready=lambda text: print(
+            f"{READY} {text}", file=sys.stderr if request.json else sys.stdout, flush=True
+        ),
         on_step=_flight_log_writer(request),
         max_flight_s=request.max_flight_s,
         link_timeout_s=request.link_timeout_s,

@@ -1,4 +1,4 @@
-"""`groundfx bench sim|model|online|sitl`: benchmarks that print figures."""
+"""`groundfx bench sim|model|online|sitl|soak`: benchmarks that print figures."""
 
 from __future__ import annotations
 
@@ -44,9 +44,57 @@ def add_parser(sub: Any) -> None:
     )
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench)
+    b = bench_sub.add_parser(
+        "soak", help="MAVSDK missions back to back against one sitl: failures, memory growth"
+    )
+    b.add_argument("--missions", type=int, default=50, help="missions to fly (default: 50)")
+    b.add_argument("--identity", default="px4", choices=("px4", "ardupilot"))
+    b.add_argument("--speedup", default="max", help="the simulator's pace (default: max)")
+    b.add_argument(
+        "--record",
+        type=Path,
+        metavar="FILE",
+        help="record the whole soak to this rerun file (default: no recording)",
+    )
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.add_argument("--out", type=Path, help="also write the JSON to this file")
+    b.set_defaults(func=cmd_bench)
+
+
+def _soak(args: argparse.Namespace) -> int:
+    from mission.campaigns.soak import soak
+
+    result = soak(
+        args.missions,
+        args.identity,
+        args.speedup,
+        args.record,
+        say=lambda text: None if args.json else print(text, flush=True),
+    )
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(result, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(
+            f"{result['flown']} of {result['missions']} missions flown, "
+            f"{len(result['failures'])} failures in {result['wall_s']:.0f} s "
+            f"(load {result['load_average']:.2f})"
+        )
+        for failure in result["failures"]:
+            print(f"  {failure}")
+        for name, m in result["memory_after_mission_1_to_last"].items():
+            print(
+                f"{name}: resident {m['first_mib']} MiB after mission 1, {m['last_mib']} MiB "
+                f"after the last ({m['growth_percent']:+.1f} %), at most {m['max_mib']} MiB"
+            )
+    return 0 if not result["failures"] else 3
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
+    if args.target == "soak":
+        return _soak(args)
     if args.target == "model":
         from learner.bench import bench_model
 

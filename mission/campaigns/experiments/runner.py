@@ -12,7 +12,6 @@ from typing import Any
 
 import yaml
 
-from autopilot.simlink import LOST
 from mission.campaigns.experiments.definitions import MEASURES, MULTI_NETWORK, Flight, Trial
 from mission.campaigns.experiments.missions import make_mission
 from mission.campaigns.gather import world_yaml_with_rho
@@ -24,8 +23,8 @@ from simbridge.world import resolve_world_path
 ONLINE_OPTION = "--online"
 SAVE_NETWORK_OPTION = "--save-model"
 # A flight whose simulator link was lost (its process gone, or silent past the link timeout)
-# is flown again (it is deterministic, so the retry gives what an undisturbed flight would have).
-LINK_LOST = LOST
+# is flown again up to this often (it is deterministic, so the retry gives what an
+# undisturbed flight would have).
 LINK_RETRIES = 2
 # Kept from each flight's summary in the results file (the rest is wall-clock noise or bulk).
 KEPT = (
@@ -99,20 +98,18 @@ def _fly_one(
     if recordings is not None:
         recordings.mkdir(parents=True, exist_ok=True)
         record_path = recordings / f"{trial.id.replace('/', '_')}_{index}.rrd"
-    for _ in range(LINK_RETRIES + 1):
-        summary = fly(
-            mission_path,
-            _world_file(flight, tmp),
-            flight.model,
-            rho=flight.rho_model,
-            start=start,
-            network=network if flight.model == "neural" else None,
-            via_gcs=False,
-            autopilot_options=options,
-            record=record_path if record_path is not None else False,
-        )
-        if not str(summary.get("ended", "")).startswith(LINK_LOST):
-            break
+    summary = fly(
+        mission_path,
+        _world_file(flight, tmp),
+        flight.model,
+        rho=flight.rho_model,
+        start=start,
+        network=network if flight.model == "neural" else None,
+        via_gcs=False,
+        autopilot_options=options,
+        record=record_path if record_path is not None else False,
+        link_retries=LINK_RETRIES,
+    )
     if not summary.get("landed"):
         raise RuntimeError(f"flight {index} did not land: {summary.get('ended')}")
     return summary
