@@ -33,8 +33,8 @@ demo: compile
 
 test: compile
 	$(BIN)/ruff check .
-# two workers, a test file each: a flight's two processes take turns on one core
-	$(BIN)/pytest -q -n 2 --dist loadfile
+# two workers (a flight's two processes take turns on one core), a test to whichever is free
+	$(BIN)/pytest -q -n 2 --dist loadgroup
 
 # every figure README.md and docs/ quote, from its seeded command (a few minutes; results in
 # docs/results/, with the date, commit and load)

@@ -80,6 +80,10 @@ class GroundStation:
         self._heartbeat()
         m = self.conn.recv_match(blocking=True, timeout=min(timeout_s, 0.2))
         self._heartbeat()  # at once when this was the first message heard
+        return self._track(m)
+
+    def _track(self, m: Any | None) -> Any | None:
+        """`m` if it is the vehicle's, the progress it tells taken in; else None."""
         if m is None or m.get_srcSystem() != self.target[0]:
             return None
         kind = m.get_type()
@@ -113,6 +117,10 @@ class GroundStation:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if not self.vehicle_alive():
+                # what it sent before it ended may still be waiting here
+                while (m := self.conn.recv_match(blocking=False)) is not None:
+                    if self._track(m) is not None and test(m):
+                        return m
                 raise VehicleEnded(f"the vehicle's process ended while waiting for {what}")
             m = self.receive(deadline - time.monotonic())
             if m is not None and test(m):

@@ -52,3 +52,15 @@ def write_world(tmp_path: Path) -> Callable[[dict], Path]:
         return path
 
     return write
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Tests that share a module-scoped fixture (a bench case flown once, a trained model)
+    run on one worker, so that it is made once; every other test goes to whichever worker
+    is free (`make test`: `-n 2 --dist loadgroup`), so two long files cannot leave one
+    worker idle at the end."""
+    for item in items:
+        info = getattr(item, "_fixtureinfo", None)
+        defs = info.name2fixturedefs.values() if info is not None else ()
+        if any(d.scope == "module" for chain in defs for d in chain):
+            item.add_marker(pytest.mark.xdist_group(item.path.name))
