@@ -1,6 +1,7 @@
 """Numbers and names from outside, refused with a reason, over loopback with a real pymavlink
 ground station: NaN and inf in every mission item form and coordinate, and a flood of
-PARAM_SETs naming no parameter (explained once a while, not once per message)."""
+PARAM_SETs naming no parameter (explained once a while, not once per message), go-to
+targets with infinity or half a position."""
 
 from __future__ import annotations
 
@@ -88,6 +89,25 @@ def test_nan_and_inf_are_refused_in_every_item_form_and_coordinate():
         ack = upload(gs, [takeoff, good])
         assert ack.type == mav.MAV_MISSION_ACCEPTED
         assert len(gs.download()) == 2
+
+
+BAD_GO_TO = [
+    # DO_REPOSITION (p5 latitude, p6 longitude, p7 altitude MSL; NaN: here) and the reason
+    ((INF, LON, 30.0), "latitude inf"),
+    ((LAT, -INF, 30.0), "longitude -inf"),
+    ((LAT, LON, INF), "altitude inf"),
+    ((NAN, LON, 30.0), "latitude and longitude both, or both NaN"),
+]
+
+
+def test_a_go_to_with_infinity_or_half_a_position_is_refused_saying_why():
+    with vehicle(speedup="1") as (gs, _, _):
+        for (lat, lon, alt), words in BAD_GO_TO:
+            said = len(gs.progress.texts)
+            result = gs.command(mav.MAV_CMD_DO_REPOSITION, -1, 1, 0, NAN, lat, lon, alt)
+            assert result == mav.MAV_RESULT_DENIED, (lat, lon, alt)
+            gs.wait_for("the reason", lambda m, n=said: len(gs.progress.texts) > n, timeout_s=10.0)
+            assert words in gs.progress.texts[said], gs.progress.texts[said:]
 
 
 @pytest.mark.parametrize("flood", [500])

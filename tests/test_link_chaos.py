@@ -46,13 +46,13 @@ LANDING = mav.MAV_LANDED_STATE_LANDING
 def flight(
     tmp_path: Path,
 ) -> Iterator[tuple[GroundStation, subprocess.Popen[str], subprocess.Popen[str], Path]]:
-    """A real-time simulator and an autopilot recording to a file, reporting to a pymavlink
-    ground station that has uploaded the hover mission, armed and started it."""
+    """A simulator at twice real time and an autopilot recording to a file, reporting to a
+    pymavlink ground station that has uploaded the hover mission, armed and started it."""
     mission = tmp_path / "hover.yaml"
     mission.write_text(HOVER)
     recording = tmp_path / "flight.rrd"
     station = GroundStation("udpin:127.0.0.1:0")
-    sim, port = start_sim("default", speedup="1")
+    sim, port = start_sim("default", speedup="2")
     gcs_port = station.conn.port.getsockname()[1]
     command = gcs_autopilot_command(port, gcs_port, "--json", f"--record={recording}")
     autopilot = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

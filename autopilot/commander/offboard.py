@@ -175,7 +175,13 @@ def global_position(
     position_m: Vec3,
 ) -> Vec3:
     """A global position as local (east, north, up); NaN latitude, longitude or altitude:
-    the vehicle's own. MSL altitudes in frames 0 and 5, relative to home otherwise."""
+    the vehicle's own (latitude and longitude both, or neither); infinity is refused. MSL
+    altitudes in frames 0 and 5, relative to home otherwise."""
+    for name, value in (("latitude", lat_deg), ("longitude", lon_deg), ("altitude", alt_m)):
+        if math.isinf(value):
+            raise Refused(f"target refused: {name} {value:g} is not a number a place has")
+    if math.isnan(lat_deg) != math.isnan(lon_deg):
+        raise Refused("target refused: latitude and longitude both, or both NaN (here)")
     if math.isfinite(lat_deg) and math.isfinite(lon_deg):
         if not (-90.0 <= lat_deg <= 90.0 and -180.0 <= lon_deg <= 180.0):
             raise Refused(f"target refused: latitude {lat_deg:g}, longitude {lon_deg:g}")
