@@ -124,7 +124,8 @@ class FlightRequest:
     flight_log: Path | None = option(None, "save airborne steps as a gap-diagnosis log", type=Path)
     max_flight_s: float = option(
         DEFAULT_MAX_FLIGHT_S,
-        "end the flight after this many simulated seconds; the autopilot then exits with "
+        "end the flight after this many simulated seconds (without --exit-after-landing: "
+        "from each arming); the autopilot then exits with "
         f"code 3 (default {DEFAULT_MAX_FLIGHT_S:g})",
         type=flight_seconds,
     )

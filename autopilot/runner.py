@@ -85,6 +85,7 @@ class LoopState:
     schedule: SampleSchedule = SampleSchedule()
     drawn_plan: tuple | None = None  # the plan the recording shows
     landed: CommanderState | None = None  # a long run's flight that has landed, until closed
+    armed_s: float | None = None  # a long run's: when the vehicle last left the ground's rest
 
 
 @dataclass
@@ -354,11 +355,16 @@ def _bound_trace(p: Parts, s: LoopState, t: float) -> None:
     phase, trace = s.cmd.phase, p.trace
     if p.config.exit_after_landing:
         return
+    resting = phase in (Phase.DISARMED, Phase.LANDED)
+    if not resting and s.armed_s is None:
+        s.armed_s = t  # its time limit counts from here
+    elif resting:
+        s.armed_s = None
     if phase == Phase.LANDED and s.landed is None:
         s.landed = s.cmd  # the flight's own plan says where it meant to land
     ended = s.landed or (s.cmd if phase == Phase.DISARMED and trace.flew() else None)
     if ended is None:
-        if phase in (Phase.DISARMED, Phase.LANDED):
+        if resting:
             trace.trim_idle()
         return
     settled = t - (ended.touchdown_s or t) >= p.config.settle_after_landing_s
@@ -369,15 +375,18 @@ def _bound_trace(p: Parts, s: LoopState, t: float) -> None:
     s.landed = None
 
 
-def _ended(config: AutopilotConfig, cmd: CommanderState, t: float) -> str | None:
-    """Why the flight ends after this step, or None."""
+def _ended(config: AutopilotConfig, s: LoopState, t: float) -> str | None:
+    """Why the flight ends after this step, or None. The time limit counts from the start,
+    or in a run that outlives its flights (`sitl`) from each arming."""
+    cmd = s.cmd
     if (
         config.exit_after_landing
         and cmd.phase == Phase.LANDED
         and t - (cmd.touchdown_s or t) >= config.settle_after_landing_s
     ):
         return "landed"
-    if t >= config.max_flight_s:
+    start_s = 0.0 if config.exit_after_landing else s.armed_s
+    if start_s is not None and t - start_s >= config.max_flight_s:
         return "mission time limit"
     if config.should_stop():
         return "stopped"
@@ -425,7 +434,7 @@ def _step(p: Parts, s: LoopState) -> str | None:
     # what the ground stations asked since, and the failsafes: for the next step (a real
     # autopilot's commander runs beside its control loop, not in it)
     s.cmd = p.station.before_step(s.cmd, inp)
-    return _ended(p.config, s.cmd, t)
+    return _ended(p.config, s, t)
 
 
 def _summary(

@@ -99,7 +99,11 @@ def _after(before: Callable[[Any], bool], then: Callable[[Any], bool]) -> Callab
 
 
 async def _soak(
-    port: int, missions: int, pids: Callable[[], dict[str, int]], say: Callable[[str], None]
+    port: int,
+    missions: int,
+    pids: Callable[[], dict[str, int]],
+    ended: Callable[[], int | None],
+    say: Callable[[str], None],
 ) -> dict[str, Any]:
     from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
     from mavsdk.asyncio.plugins.action import ActionAsync
@@ -128,6 +132,10 @@ async def _soak(
                 _until(telemetry.subscribe_health(), lambda h: h.is_armable),
             )
             for n in range(1, missions + 1):
+                if ended() is not None:  # nothing more can fly: say so, once
+                    failures.append(f"mission {n}: the sitl had ended (exit code {ended()})")
+                    say(failures[-1])
+                    break
                 t0 = time.monotonic()
                 try:
                     await _fly_one(raw, action, telemetry, imported.mission_items)
@@ -183,7 +191,7 @@ def soak(
 
     t0 = time.monotonic()
     try:
-        result = asyncio.run(_soak(port, missions, pids, say))
+        result = asyncio.run(_soak(port, missions, pids, sitl.poll, say))
     finally:
         sitl.send_signal(signal.SIGINT)
         try:
