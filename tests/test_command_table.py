@@ -92,3 +92,28 @@ def test_a_command_registered_in_the_table_answers_a_real_client(station, client
 
     other = GroundStation(GcsLink([]), ParamStore(None), PX4, ORIGIN)
     assert mav.MAV_CMD_DO_SET_HOME not in other.commands  # one station's table is its own
+
+
+@pytest.mark.parametrize(
+    ("time_s", "position_lost", "height_m"),
+    [(0.1, None, 0.0126), (1.0, None, 0.0126), (1.0, "motion capture lost", 0.0126),
+     (1.0, None, 0.5)],
+)  # fmt: skip
+def test_health_says_armable_exactly_when_arming_is_accepted(
+    station, time_s, position_lost, height_m
+):
+    """SYS_STATUS as MAVSDK reads it: the GPS bit is its local and global position health,
+    PREARM_CHECK its is_armable (and QGroundControl's ready state)."""
+    from autopilot.gcs import telemetry
+
+    inp = dataclasses.replace(
+        ON_THE_GROUND, time_s=time_s, position_lost=position_lost, height_m=height_m
+    )
+    status = telemetry.sys_status(station._snapshot(CommanderState(), inp), 0.0, 0)
+    armable = bool(status.onboard_control_sensors_health & mav.MAV_SYS_STATUS_PREARM_CHECK)
+    position_ok = bool(status.onboard_control_sensors_health & mav.MAV_SYS_STATUS_SENSOR_GPS)
+    _, verdict = requests.arm(CommanderState(), time_s, HERE, inp.not_ready(), False)
+    assert armable == verdict.accepted
+    assert position_ok == (time_s >= requests.SENSORS_SETTLE_S and position_lost is None)
+    if not armable:
+        assert verdict.reason  # and the refusal says why
