@@ -371,7 +371,8 @@ def _bound_trace(p: Parts, s: LoopState, t: float) -> None:
     if phase == Phase.LANDED and not settled:
         return
     figures = flight_figures(trace, trace_log(trace), ended, p.resting_height_m, 0.0, p.nav)
-    trace.close_flight({k: v for k, v in figures.items() if k not in ("wall_s", "rtf")})
+    figures = {k: v for k, v in figures.items() if k not in ("wall_s", "rtf")}
+    trace.close_flight({**figures, "ended": "landed" if ended is s.landed else "disarmed"})
     s.landed = None
 
 

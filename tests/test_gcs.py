@@ -345,6 +345,10 @@ def test_sitl_takes_off_flies_offboard_and_a_fence_breach_returns_home():
     assert len(ready) == 1, out
     assert f"udpout:127.0.0.1:{port}; px4 identity; signing off" in ready[0], ready
     assert out.strip().splitlines()[-1] == "groundfx sitl: stopped by SIGINT"
+    # the autopilot's last words: a table of its flights, each saying how it ended
+    assert "groundfx autopilot: stopped; 1 flight, 1 landed" in out, out
+    row = next(line for line in out.splitlines() if line.startswith("  1 "))
+    assert row.split()[1].startswith("landed"), row  # "landed", or "landed, then stopped"
 
 
 def send_target(gs: GroundStation, ned: tuple[float, float, float]) -> None:

@@ -230,12 +230,9 @@ def run_autopilot(request: FlightRequest) -> int:
     if request.json:
         print(json.dumps(summary), flush=True)
     else:
-        print(
-            f"groundfx autopilot: {flight.ended}; "
-            + ", ".join(
-                f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in summary.items()
-            )
-        )
+        from mission.cli.exit_summary import exit_summary
+
+        print(exit_summary(summary), flush=True)
     if not flight.summary["landed"] and flight.ended != "stopped":
         print(f"groundfx autopilot: {flight.ended}", file=sys.stderr)
         return 3
