@@ -29,7 +29,7 @@ from mission.plans.formats import load_mission_file
 from simbridge.frames import geodetic_to_local
 from simbridge.launch import start_sim
 from simbridge.world import load_world
-from tests.helpers import REPO
+from tests.helpers import REPO, stop_process
 
 os.environ.setdefault("MAVLINK20", "1")
 
@@ -102,13 +102,7 @@ def vehicle() -> Iterator[Callable[..., Vehicle]]:
 
     yield start
     for proc in reversed(started):  # the autopilot first: the simulator then ends cleanly
-        if proc.poll() is None:
-            proc.terminate()
-        try:
-            proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.communicate()
+        stop_process(proc)
 
 
 def square_items() -> tuple[Any, ...]:

@@ -61,6 +61,17 @@ def ideal_sensor_noise() -> dict[str, float]:
     return {k: v for k, v in dataclasses.asdict(SensorNoise.ideal()).items() if k != "seed"}
 
 
+def stop_process(proc: subprocess.Popen, timeout_s: float = 10.0) -> None:
+    """Terminate `proc` if it still runs, wait for it, kill it if it will not end."""
+    if proc.poll() is None:
+        proc.terminate()
+    try:
+        proc.communicate(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+
+
 @contextlib.contextmanager
 def cpu_bound(count: int = 2) -> Iterator[None]:
     """`count` processes that only burn CPU, beside what the block runs: a busy machine."""

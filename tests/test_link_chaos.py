@@ -26,7 +26,7 @@ from mission.plans.formats import load_mission_file
 from simbridge.config import ConfigError
 from simbridge.launch import finish, start_sim
 from simbridge.world import load_world
-from tests.helpers import recorded_s
+from tests.helpers import recorded_s, stop_process
 
 WORLD_ORIGIN = load_world("default").origin
 ORIGIN = Home(WORLD_ORIGIN.lat_deg, WORLD_ORIGIN.lon_deg, WORLD_ORIGIN.alt_m)
@@ -68,13 +68,7 @@ def flight(
         with contextlib.suppress(ProcessLookupError):
             sim.send_signal(signal.SIGCONT)
         try:
-            if autopilot.poll() is None:
-                autopilot.terminate()
-            try:
-                autopilot.communicate(timeout=30)
-            except subprocess.TimeoutExpired:
-                autopilot.kill()
-                autopilot.communicate()
+            stop_process(autopilot, timeout_s=30)
         finally:  # nothing this test started outlives it
             finish(sim)
             station.close()

@@ -49,11 +49,11 @@ def children(pid: int) -> list[int]:
     return [int(p) for p in text.split()]
 
 
-def _command_line(name: str, pid: int) -> str:
+def _command_line(pid: int) -> str:
     try:
         return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
     except OSError:
-        return name
+        return ""
 
 
 async def _within(what: str, seconds: float, awaitable: Awaitable[Any]) -> Any:
@@ -185,7 +185,7 @@ def soak(
     def pids() -> dict[str, int]:
         named = {}
         for pid in children(sitl.pid):
-            line = _command_line("", pid)
+            line = _command_line(pid)
             named["autopilot" if " autopilot " in f"{line} " else "simulator"] = pid
         return named
 

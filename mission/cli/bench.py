@@ -61,6 +61,16 @@ def add_parser(sub: Any) -> None:
     b.set_defaults(func=cmd_bench)
 
 
+def _wrote_json(args: argparse.Namespace, result: dict[str, Any]) -> bool:
+    """The result to `--out` (if given) and, with `--json`, to stdout: True if printed."""
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(result, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(result))
+    return bool(args.json)
+
+
 def _soak(args: argparse.Namespace) -> int:
     from mission.campaigns.soak import soak
 
@@ -71,12 +81,7 @@ def _soak(args: argparse.Namespace) -> int:
         args.record,
         say=lambda text: None if args.json else print(text, flush=True),
     )
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=2) + "\n")
-    if args.json:
-        print(json.dumps(result))
-    else:
+    if not _wrote_json(args, result):
         print(
             f"{result['flown']} of {result['missions']} missions flown, "
             f"{len(result['failures'])} failures in {result['wall_s']:.0f} s "
@@ -137,12 +142,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.repeat < 1:
         raise ConfigError(f"--repeat: {args.repeat} must be at least 1")
     result = bench_sim(args.world, args.seconds, args.repeat)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=2) + "\n")
-    if args.json:
-        print(json.dumps(result))
-    else:
+    if not _wrote_json(args, result):
         r = result
         print(
             f"physics:  {r['physics_rtf']:.1f}x real time "
