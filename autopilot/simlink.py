@@ -172,6 +172,9 @@ class SimLink:
                     raise Stopped from None
                 if waited_s >= self._wait_s():
                     raise LinkLost(f"{LOST}: silent for {self._wait_s():g} s") from None
+            except (ConnectionResetError, BrokenPipeError):
+                # a peer killed with bytes unread resets rather than closes: gone all the same
+                raise LinkLost(f"{LOST}: it closed the connection") from None
             except OSError as err:
                 raise LinkLost(f"{LOST}: {(err.strerror or str(err)).lower()}") from None
         if not data:

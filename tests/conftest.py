@@ -54,6 +54,7 @@ def write_world(tmp_path: Path) -> Callable[[dict], Path]:
     return write
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the marker
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Tests that share a module-scoped fixture (a bench case flown once, a trained model)
     run on one worker, so that it is made once; every other test goes to whichever worker
