@@ -18,7 +18,7 @@ from autopilot.request import NO_PARAMS_FILE, FlightRequest
 from autopilot.simlink import LOST
 from mission.gcs_client import GroundStation, GroundStationError, VehicleEnded
 from mission.plans.formats import load_mission_file
-from mission.recordings import default_recording_path
+from mission.recordings import default_recording_path, recording_label
 from simbridge.config import ConfigError
 from simbridge.launch import finish, spawn_local_sim
 from simbridge.world import World, load_world, resolve_world_path
@@ -86,7 +86,8 @@ def _flight_request(
     if record is False:
         request = dataclasses.replace(request, no_record=True)
     else:
-        path = default_recording_path(mission_path, model) if record is True else record
+        label = recording_label(model, request.online)
+        path = default_recording_path(mission_path, label) if record is True else record
         request = dataclasses.replace(
             request,
             record=Path(path),

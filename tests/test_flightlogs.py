@@ -294,6 +294,14 @@ def test_refuses_an_unknown_mapping_key(tmp_path: Path) -> None:
     refuses(tmp_path, {"colums": {}}, r"bad\.yaml: unknown key 'colums'; known keys: names")
 
 
+def test_refuses_a_quaternion_order_beside_named_quaternion_columns(tmp_path: Path) -> None:
+    """Both would reorder the components: the quaternion flipped twice, every row read as the
+    body upside down."""
+    names = {"qw": "q.w", "qx": "q.x", "qy": "q.y", "qz": "q.z"}
+    refuses(tmp_path, {"names": names, "quaternion_order": "xyzw"},
+            r"quaternion_order xyzw beside names for qw, qx, qy, qz: give one of them")  # fmt: skip
+
+
 def test_refuses_an_unknown_actuator_kind(tmp_path: Path) -> None:
     refuses(tmp_path, {"actuators": {"kind": "rpm", "columns": ["a"] * 4}},
             r"bad\.yaml: actuators\.kind: 'rpm' is not one of rotor_speed, rotor_")  # fmt: skip

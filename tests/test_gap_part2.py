@@ -184,6 +184,13 @@ def test_a_large_remainder_no_network_carries_over_is_not_called_nothing() -> No
     large = sentence(0.57, -0.14, False)
     assert "nothing systematic" not in large and "differs between them" in large
     assert "nothing systematic is left" in sentence(0.05, -0.14, False)
+    # a share the network removes is never printed negative or undefined
+    for learnable in (-0.52, float("nan")):
+        text = sentence(0.3, learnable, False)
+        assert "-" not in text.replace("-flight", "") and "nan" not in text, text
+    assert "does not carry over" in sentence(0.3, -0.52, False) and "52% more" in sentence(
+        0.3, -0.52, False
+    )
 
 
 def test_effects_named_beside_a_remainder_larger_than_what_they_explain_are_not_confident() -> None:

@@ -243,13 +243,13 @@ def test_fallbacks_are_stated_one_fitting_flight_and_no_mission(tmp_path: Path) 
     figures = json.loads((out / "gap.json").read_text())
     notes = " ".join(figures["notes"])
     assert "closed-loop replay skipped: the logs carry no mission" in notes
-    assert "--folds 3 asked, but with one fitting flight" in notes
+    assert "with one fitting flight there is no flight to leave out" in notes
     steps = [s for s in figures["search"] if "added" in s]
     assert steps and all(s["cv_ev"] is None and "not computed" in s["cv_ev_note"] for s in steps)
     assert "NaN" not in (out / "gap.json").read_text()
     report = (out / "report.md").read_text()
     assert "closed-loop replay skipped: the logs carry no mission" in report
-    assert "--folds 3 asked" in report
+    assert "with one fitting flight there is no flight to leave out" in report
     assert "note: closed-loop replay skipped" in done.stdout
     # no held-out flight either: the gap is in-sample, and said so
     alone = run_diagnosis(

@@ -309,6 +309,7 @@ def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_pau
     from learner.flightlogs.recording import read_recording
     from mission.campaigns.trials import landing_trial
     from mission.fly import fly
+    from mission.recordings import logs_dir
 
     data, start = landing_trial(0)
     data["waypoints"][-1]["hold_s"] = 3.0
@@ -329,7 +330,8 @@ def test_a_flight_adapts_in_lockstep_reproducibly_saves_the_model_and_can_be_pau
 
     saved, rrd = tmp_path / "adapted.npz", tmp_path / "a.rrd"
     a = flight("--online", "rls", "--save-model", str(saved), record=rrd)
-    b = flight("--online", "rls")
+    b = flight("--online", "rls", record=True)  # into the logs folder, named by its method
+    assert sorted(logs_dir().glob(f"*-{mission.stem}-neural-online-rls.rrd"))
     assert a["landed"] and a["online_mode"] == "deterministic"
     assert a["online_version"] == a["online_accepted"] > 3
     assert a["online_accepted"] + a["online_rejected"] == a["online_updates"]

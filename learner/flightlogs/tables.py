@@ -84,6 +84,15 @@ class ColumnMapping:
                 )
         if self.quaternion_order not in ("wxyz", "xyzw"):
             raise ConfigError("column mapping quaternion_order: expected wxyz or xyzw")
+        named = [q for q in QUAT if q in self.names]
+        if self.quaternion_order != "wxyz" and named:
+            # names already put each component in its place; reordering too would flip it twice
+            raise ConfigError(
+                f"column mapping: quaternion_order {self.quaternion_order} beside names for "
+                f"{', '.join(named)}: give one of them (names say which column is each "
+                "component; quaternion_order is for the columns qw, qx, qy, qz holding x, y, "
+                "z, w)"
+            )
         if self.frame not in ("enu_flu", "ned_frd"):
             raise ConfigError("column mapping frame: expected enu_flu or ned_frd")
         self._check_time()

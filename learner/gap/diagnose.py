@@ -82,15 +82,15 @@ def fallback_notes(fit: list[FlightData], hold: list[FlightData], folds: int) ->
     if n < 2:
         where = "on the held-out flights" if hold else "in-sample, on the fitting flight itself"
         notes.append(
-            f"cross-validation: --folds {folds} asked, but with one fitting flight there is no "
-            "flight to leave out: each step of the effect search was judged without the "
+            "cross-validation: with one fitting flight there is no flight to leave out: each "
+            "step of the effect search was judged without the "
             f"cross-validated explained variance (cv_ev), and the gap is measured {where}"
             + ("" if hold else " (optimistic: the same data fitted and scored)")
         )
     elif folds > n:
         notes.append(
-            f"cross-validation: --folds {folds} asked with {n} fitting flights: {n} folds, "
-            "one flight left out at a time"
+            f"cross-validation: {n} fitting flights, so {n} folds (of {folds}), one flight left "
+            "out at a time"
         )
     for d in fit + hold:  # rows the reader dropped (non-finite values, repeated stamps)
         dropped = [c for c in d.meta.get("conversions", []) if c.startswith("rows: ")]

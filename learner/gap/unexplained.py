@@ -189,6 +189,24 @@ def _masked(d: FlightData, m: np.ndarray) -> FlightData:
     return dataclasses.replace(d, time_s=d.time_s[idx], segment=segment)
 
 
+def _carried(learnable: float) -> str:
+    """What a network on the regime features does on flights it was not trained on, in words:
+    a share removed, never a negative or undefined one."""
+    if not np.isfinite(learnable):
+        return (
+            "a network on the regime features could not be scored on flights it was not trained on"
+        )
+    if learnable < 0.0:
+        return (
+            "a network on the regime features does not carry over to flights it was not "
+            f"trained on (it leaves {-learnable * 100:.0f}% more than it was given)"
+        )
+    return (
+        f"a network on the regime features removes {learnable * 100:.0f}% of that on flights "
+        "it was not trained on"
+    )
+
+
 def sentence(share: float, learnable: float, significant: bool) -> str:
     if significant:
         return (
@@ -197,10 +215,8 @@ def sentence(share: float, learnable: float, significant: bool) -> str:
             f"{learnable * 100:.0f}% of it on flights it was not trained on. No catalogue "
             "effect explains it; the effects named may stand in for one outside the catalogue"
         )
-    head = (
-        f"the catalogue leaves {share * 100:.0f}% of the systematic force gap; a network on "
-        f"the regime features removes {learnable * 100:.0f}% of that on flights it was not "
-        "trained on"
+    head = f"the catalogue leaves {share * 100:.0f}% of the systematic force gap; " + _carried(
+        learnable
     )
     if share < SHARE_MIN:
         return head + ": nothing systematic is left that the catalogue misses"

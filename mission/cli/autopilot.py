@@ -161,11 +161,11 @@ def _recording(request: FlightRequest, config: Any) -> tuple[Path | None, Any]:
 
     from autopilot.control.ground_models import default_network
     from autopilot.recording.record_options import RecordOptions
-    from mission.recordings import record_path
+    from mission.recordings import record_path, recording_label
     from simbridge.world import load_world
 
     params = config.params
-    recording = record_path(request, params.model()[0])
+    recording = record_path(request, recording_label(params.model()[0], request.online))
     if recording is None:
         return None, config
     model, rho = params.model()
