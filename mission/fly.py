@@ -321,5 +321,7 @@ def describe(summary: dict[str, Any]) -> str:
             f"{fmt('estimator_controller_us_p99', 'us')} p99",
             f"  {summary['simulator']}",
             *([f"  recording: {summary['recording']}"] if summary.get("recording") else []),
+            *([f"  report: {summary['report']}"] if summary.get("report") else []),
+            *([f"  {summary['report_error']}"] if summary.get("report_error") else []),
         ]
     )

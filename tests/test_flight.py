@@ -90,6 +90,25 @@ def test_fly_json_reports_the_figures():
     # a figure, not a speed target (the benchmark commands measure speed): > 0 on any machine;
     # the flight lasted at least the mission's two holds (1 s and 6 s)
     assert summary["sim_s"] > 7 and summary["rtf"] > 0
+    # the flight on one page beside its recording: the five answers, as the figures say
+    png = Path(summary["report"])
+    assert png.is_file() and png.stat().st_size > 20_000 and png.read_bytes()[:4] == b"\x89PNG"
+    page = json.loads(png.with_name(png.name.replace(".png", ".json")).read_text())
+    answers = page["answers"]
+    assert list(answers) == ["landing", "hold", "model", "learner", "rotors"]
+    assert answers["landing"]["landed"] and "landed" in answers["landing"]["text"]
+    assert answers["hold"]["rms_mm"] == pytest.approx(summary["hold_z_rms_error_m"] * 1e3)
+    assert answers["model"]["hold_rms_mn"] is not None and " mN " in answers["model"]["text"]
+    learner = answers["learner"]
+    assert learner["method"] is None and "no online learning" in learner["text"]
+    assert len(answers["rotors"]["rms_difference_rad_s"]) == 4
+    # and for any recording, on demand: the same answers
+    again = run_groundfx("review", summary["recording"], "--report")
+    assert again.returncode == 0 and str(png) in again.stdout
+    assert json.loads(png.with_name(png.name.replace(".png", ".json")).read_text()) == page
+    # what is not a recording is refused with the reason
+    bad = run_groundfx("review", str(png), "--report")
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr
 
 
 def test_fly_gives_the_autopilot_the_worlds_vehicle(tmp_path):

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from mission import EXAMPLES_DIR
+from mission.flight_report_page import write_report
 from mission.fly import describe, fly
 from mission.recordings import default_recording_path
 from simbridge.plots import plot_ground_effect
@@ -28,8 +29,11 @@ def fly_demo(
     summaries = {}
     for model in DEMO_MODELS:
         record = default_recording_path(DEMO_MISSION, model, logs)
-        summaries[model] = fly(DEMO_MISSION, world=world, model=model, record=record, via_gcs=False)
-        say(describe(summaries[model]))
+        summary = fly(DEMO_MISSION, world=world, model=model, record=record, via_gcs=False)
+        if Path(record).is_file():  # each flight on one page beside its recording
+            summary["report"] = str(write_report(Path(record))[0])
+        summaries[model] = summary
+        say(describe(summary))
     return summaries
 
 
@@ -53,6 +57,9 @@ def demo_table(summaries: dict[str, dict[str, Any]]) -> str:
     if recordings:
         rows += ["", "open a recording in the rerun viewer (--web on a headless machine):"]
         rows += [f"  groundfx review {path}" for path in recordings]
+    reports = [s["report"] for s in summaries.values() if s.get("report")]
+    if reports:
+        rows += ["", "each flight on one page:", *(f"  {path}" for path in reports)]
     return "\n".join(rows)
 
 

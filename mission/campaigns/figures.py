@@ -13,6 +13,7 @@ import json
 import os
 import platform
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -24,6 +25,7 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parents[2]
 RESULTS_DIR = REPO / "docs" / "results"
+DEMO_REPORT = "demo-neural.report.png"
 MARKER = re.compile(r"<!--fig ([\w.-]+)-->(.*?)<!--/fig-->", flags=re.S)
 
 Figures = dict[str, str]
@@ -47,7 +49,9 @@ def _demo() -> Figures:
 
     with tempfile.TemporaryDirectory() as logs:
         summaries = fly_demo("rho2", Path(logs), say=_quiet)
-    figures = {}
+        # the learned model's flight on one page, as the README shows it
+        shutil.copyfile(summaries["neural"]["report"], RESULTS_DIR / DEMO_REPORT)
+    figures = {"neural.report": f"results/{DEMO_REPORT}"}
     for model, s in summaries.items():
         figures[f"{model}.landing_error_mm"] = f"{s['landing_error_m'] * 1000:.2f}"
         figures[f"{model}.hold_rms_mm"] = f"{s['hold_z_rms_error_m'] * 1000:.2f}"

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 from pathlib import Path
 from typing import Any
 
 from autopilot.request import DEFAULT_GCS_URLS, FlightRequest, add_options
 from mission.cli.options import DEFAULT_LOGS, add_sensor_options, sensor_arguments, speedup
+from simbridge.config import ConfigError
 
 # what `groundfx fly` asks of its autopilot process, as `groundfx autopilot` takes it
 FLY_REQUEST = ("rho", "network", "trajectory", "flight_log", "max_flight_s", "identity", "param")
@@ -103,6 +105,16 @@ def cmd_fly(args: argparse.Namespace) -> int:
         sim_options=sim_options,
         **asked,
     )
+    recording = summary.get("recording")
+    if recording and Path(recording).is_file():  # a flight on one page, beside its recording
+        from mission.cli.review import write_flight_report
+
+        started = time.perf_counter()
+        try:
+            summary["report"] = str(write_flight_report(Path(recording))[0])
+            summary["report_wall_s"] = time.perf_counter() - started
+        except ConfigError as err:  # the flight stands; the page could not be drawn
+            summary["report_error"] = str(err)
     print(json.dumps(summary) if args.json else describe(summary))
     return 0 if summary["landed"] else 1
 

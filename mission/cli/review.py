@@ -1,4 +1,5 @@
-"""`groundfx review RECORDING [--web]`: open a flight recording in the rerun viewer.
+"""`groundfx review RECORDING [--web | --report]`: open a flight recording in the rerun viewer,
+or write its one-page report (`mission/flight_report.py`).
 
 Native: the `rerun` viewer of the installed rerun-sdk opens the file (it needs a display).
 `--web`: the same viewer serves itself over HTTP instead (`rerun --serve-web`), for a headless
@@ -92,8 +93,29 @@ def add_review_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--web-port", type=int, default=9090, help="HTTP port of --web (default: 9090)")
     p.add_argument("--grpc-port", type=int, default=9876, help="data port of --web (default: 9876)")
+    p.add_argument(
+        "--report",
+        action="store_true",
+        help="write the flight's one-page report (REC.report.png, answers in REC.report.json) "
+        "instead of opening a viewer",
+    )
     p.set_defaults(func=cmd_review)
 
 
+def write_flight_report(path: Path) -> tuple[Path, Path]:
+    """The one-page report of a readable recording, or a message saying why not."""
+    from mission.flight_report_page import write_report
+
+    check_recording(path)
+    try:
+        return write_report(path)
+    except (KeyError, ValueError) as err:  # a recording of another program, or cut too short
+        raise ConfigError(f"{path}: no flight report: {err}") from None
+
+
 def cmd_review(args: argparse.Namespace) -> int:
+    if args.report:
+        png, answers = write_flight_report(args.recording)
+        print(f"groundfx review: report {png} (answers: {answers})")
+        return 0
     return review(args.recording, args.web, args.web_port, args.grpc_port)
