@@ -87,7 +87,14 @@ def test_diagnose_reads_renamed_columns(
     assert figures["effects"]["wind"]["status"] == "not tried"
     added = {name for step in figures["search"][1:] for name in step["set"]}
     assert added <= {"rotor_drag", "body_drag", "thrust_mass", "ground_effect"}
-    assert "rotor_drag" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "rotor_drag" in out
+    # it ends with the gaps before and after, what is left, and where the report is
+    last = out.strip().splitlines()[-3:]
+    assert last[0].startswith("force gap: ") and " mN -> " in last[0] and "shrink" in last[0]
+    assert last[1].startswith("left unexplained by the catalogue: ")
+    assert last[2] == f"report: {tmp_path / 'out' / 'report.md'}"
+    assert "nan" not in out and "-%" not in out
     # a bad mapping names the column
     mapping.write_text(yaml.safe_dump({"names": {"time_s": "nope"}}))
     assert main(["gap", "diagnose", str(renamed[0]), "--world", str(world), "--columns",

@@ -4,6 +4,7 @@ flights before and after (force, rollouts; overall and per region)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -58,6 +59,15 @@ class Diagnosis:
     unexplained: dict[str, Any] = field(default_factory=dict)  # what the catalogue leaves
     learned_model: ResidualModel | None = None  # that, learnt (a `learned_residual` effect)
     z_offsets_m: dict[str, float] = field(default_factory=dict)  # log -> z shifted by (m)
+
+
+# What a diagnosis does, in the order it does it (`diagnose`'s `on_stage`)
+STAGES = (
+    "levelling and preparing the logs",
+    "searching the catalogue",
+    "final fit, intervals, regimes and gaps",
+    "learning what the catalogue leaves",
+)
 
 
 def _problem(flights: list[FlightData], nominal: Values, vehicle: Vehicle) -> gapfit.Problem:
@@ -130,12 +140,15 @@ def diagnose(
     folds: int = 3,
     z_offset_m: float | None = None,
     candidates: list[str] | None = None,
+    on_stage: Callable[[str], None] = lambda stage: None,
 ) -> Diagnosis:
     """The whole analysis; with no held-out logs the gap is measured by cross-validation.
     The logs' z is first put on the world's ground (`ground_level.level_logs`: from where
     the vehicle rests, or `z_offset_m`). `candidates`: the catalogue candidates the search
-    may choose from (default: all; an unknown name is a ValueError naming the known ones)."""
+    may choose from (default: all; an unknown name is a ValueError naming the known ones).
+    `on_stage` hears each of STAGES as it begins (a progress bar)."""
     check_candidates(candidates)
+    on_stage(STAGES[0])
     nominal = nominal_values(world.effects, vehicle)
     leveled, level_notes, z_offsets = level_logs(fitting + held_out, world, vehicle, z_offset_m)
     fitting, held_out = leveled[: len(fitting)], leveled[len(fitting) :]
@@ -157,6 +170,7 @@ def diagnose(
     # ill-conditioned and a few rows more or less change the bounded trust region's work
     # many times over; the best of the candidates' multi-starts gives the same ratio to 1e-4
     # on the bench's cases at six times the cost
+    on_stage(STAGES[1])
     everything = gapfit.fit(
         problem,
         tuple(c for c in excited if c != "wind" and c in tried),
@@ -168,6 +182,7 @@ def diagnose(
         [(r - p)[:: gapfit.STRIDE] for r, p in zip(problem.residuals, after, strict=True)]
     )
     best, trail = forward_search(problem, tried, folds)
+    on_stage(STAGES[2])
     best = gapfit.final_fit(problem, best)  # the reported values and intervals: every row
     effects = effect_report(problem, best, excitation, excited, trail, tried, candidates)
     all_data = fit_data + hold_data
@@ -179,6 +194,7 @@ def diagnose(
         gap = held_out_gap(hold_problem, best.values)
     else:
         gap = cross_validated_gap(problem, best.names, folds)
+    on_stage(STAGES[3])
     left = learn_unexplained(problem, best.values)
     corrected = [
         r - p

@@ -6,13 +6,17 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import yaml
+from tqdm import tqdm
 
 from learner.flightlogs.readers import read_log
 from learner.flightlogs.tables import load_mapping
+from learner.gap.diagnose import STAGES as DIAGNOSE_STAGES
 from learner.gap.diagnose import check_candidates, diagnose
 from learner.gap.report import corrected_world_yaml, figures, write_outputs
 from learner.gap.rollout import shrink, tracking_difference_m
@@ -20,6 +24,11 @@ from mission.campaigns.gap_flights import fly_log
 from simbridge.config import ConfigError
 from simbridge.vehicle import Vehicle, load_vehicle, resolve_vehicle_path
 from simbridge.world import World, load_world, resolve_world_path
+
+READING = "reading the logs"
+REPLAYING = "replaying the held-out missions (2 flights each)"
+WRITING = "writing the report"
+BAR = "{desc:<48} {n_fmt}/{total_fmt} stages, {elapsed}"
 
 
 def run_diagnosis(
@@ -33,18 +42,48 @@ def run_diagnosis(
     replay: bool = True,
     z_offset_m: float | None = None,
     candidates: list[str] | None = None,
+    progress: bool = False,
 ) -> dict[str, Any]:
     """Diagnose, replay held-out missions closed-loop, write every output; the figures.
     The vehicle is `vehicle_name`, else the world's `vehicle:` (the simulator's, nano by
     default); a `vehicle_name` other than the world's is refused. `z_offset_m`: subtracted
     from every log's z (default: found from where each flight rests on the ground);
-    `candidates`: the catalogue candidates the search may choose (default: all)."""
+    `candidates`: the catalogue candidates the search may choose (default: all); `progress`:
+    a bar on stderr naming each stage (on a terminal)."""
     if folds < 2:
         raise ConfigError(f"--folds: {folds} is outside the allowed range [2, number of logs]")
     try:
         check_candidates(candidates)
     except ValueError as err:
         raise ConfigError(str(err)) from None
+    stages = (READING, *DIAGNOSE_STAGES, *((REPLAYING,) if replay else ()), WRITING)
+    with tqdm(total=len(stages), unit="stage", disable=None if progress else True,
+              file=sys.stderr, bar_format=BAR) as bar:  # fmt: skip
+
+        def on_stage(stage: str) -> None:
+            bar.update(stages.index(stage) - bar.n)
+            bar.set_description_str(stage)
+
+        result = _run(fitting, held_out, world, out, folds, columns, vehicle_name, replay,
+                      z_offset_m, candidates, on_stage)  # fmt: skip
+        bar.update(len(stages) - bar.n)
+    return result
+
+
+def _run(
+    fitting: list[Path],
+    held_out: list[Path],
+    world: str,
+    out: Path,
+    folds: int,
+    columns: Path | None,
+    vehicle_name: str | None,
+    replay: bool,
+    z_offset_m: float | None,
+    candidates: list[str] | None,
+    on_stage: Callable[[str], None],
+) -> dict[str, Any]:
+    on_stage(READING)
     mapping = load_mapping(columns)
     world_path = resolve_world_path(world)
     world_obj = load_world(world_path)
@@ -53,7 +92,9 @@ def run_diagnosis(
     fit_logs = [read_log(p, mapping, vehicle) for p in fitting]
     hold_logs = [read_log(p, mapping, vehicle) for p in held_out]
     try:
-        diagnosis = diagnose(fit_logs, hold_logs, world_obj, vehicle, folds, z_offset_m, candidates)
+        diagnosis = diagnose(
+            fit_logs, hold_logs, world_obj, vehicle, folds, z_offset_m, candidates, on_stage
+        )
     except ValueError as err:
         raise ConfigError(str(err)) from None
     out.mkdir(parents=True, exist_ok=True)
@@ -66,9 +107,11 @@ def run_diagnosis(
     if replay:
         corrected = out / "corrected_world.yaml"
         corrected.write_text(corrected_world_yaml(flown_world.read_text(), diagnosis))
+        on_stage(REPLAYING)
         closed_loop = replay_missions(hold_logs, flown_world, corrected, out / "replays")
     else:
         closed_loop = {"status": "skipped", "why": "not asked for (--no-replay)"}
+    on_stage(WRITING)
     write_outputs(diagnosis, out, flown_world, closed_loop)
     return figures(diagnosis, closed_loop)
 

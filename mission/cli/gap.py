@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -78,7 +79,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     result = run_diagnosis(
         args.logs, args.holdout, args.world, args.out, args.folds, args.columns, args.vehicle,
         not args.no_replay, args.z_offset,
-        args.candidates.split(",") if args.candidates else None,
+        args.candidates.split(",") if args.candidates else None, progress=True,
     )  # fmt: skip
     for effect, e in result["effects"].items():
         params = ", ".join(f"{p} {v['value']:.4g}" for p, v in (e.get("parameters") or {}).items())
@@ -89,22 +90,41 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         print(f"{effect:20s} {e['status']}{shown}{why}")
     for note in result.get("notes") or []:
         print(f"note: {note}")
-    f = result["gap"]["force_rms_n"]
-    print(f"force gap {f['before'] * 1000:.2f} -> {f['after'] * 1000:.2f} mN "
-          f"(shrink {f['shrink'] * 100:.0f}%); report: {args.out / 'report.md'}")  # fmt: skip
-    m = result["gap"].get("force_rms_n_measured_floor")
+    g = result["gap"]
+    m = g.get("force_rms_n_measured_floor")
     if m:
-        print(f"against the measured noise floor ({m['floor'] * 1000:.2f} mN, white "
-              f"{m['white_floor'] * 1000:.2f}): {m['before'] * 1000:.2f} -> "
-              f"{m['after'] * 1000:.2f} mN (shrink {m['shrink'] * 100:.0f}%)")  # fmt: skip
-    learned = result["gap"].get("force_rms_n_learned")
+        print(f"against the measured noise floor ({_fig(m['floor'], 1e3, 'mN')}, white "
+              f"{_fig(m['white_floor'], 1e3, 'mN')}): {_gap(m, 1e3, 'mN')}")  # fmt: skip
+    learned = g.get("force_rms_n_learned")
     if learned:
-        print(f"with the learnt residual: {learned['after'] * 1000:.2f} mN (shrink "
-              f"{learned['shrink'] * 100:.0f}%)")  # fmt: skip
+        print(f"with the learnt residual: {_gap(learned, 1e3, 'mN')}")
     unexplained = result.get("unexplained") or {}
     if unexplained.get("sentence"):
         print(f"unexplained: {unexplained['sentence']}")
+    # the ending a reader looks for: the gaps before and after, what is left, where to read on
+    print(f"force gap: {_gap(g['force_rms_n'], 1e3, 'mN')}")
+    if g.get("torque_rms_n_m"):
+        print(f"torque gap: {_gap(g['torque_rms_n_m'], 1e6, 'uN m')}")
+    if unexplained.get("share") is not None:
+        print(f"left unexplained by the catalogue: {_pct(unexplained['share'])} of the "
+              "systematic force gap")  # fmt: skip
+    print(f"report: {args.out / 'report.md'}")
     return 0
+
+
+def _pct(share: float | None) -> str:
+    """A share as a percentage; never "nan%" (a share that could not be measured)."""
+    return "n/a" if share is None or not math.isfinite(share) else f"{share * 100:.0f}%"
+
+
+def _fig(value: float | None, scale: float, unit: str) -> str:
+    return "n/a" if value is None or not math.isfinite(value) else f"{value * scale:.2f} {unit}"
+
+
+def _gap(g: dict[str, float], scale: float, unit: str) -> str:
+    """before -> after (shrink), in `unit`."""
+    return (f"{_fig(g.get('before'), scale, unit)} -> {_fig(g.get('after'), scale, unit)} "
+            f"(shrink {_pct(g.get('shrink'))})")  # fmt: skip
 
 
 def cmd_convert(args: argparse.Namespace) -> int:
