@@ -259,6 +259,28 @@ def test_fallbacks_are_stated_one_fitting_flight_and_no_mission(tmp_path: Path) 
     assert "in-sample" in (tmp_path / "alone/report.md").read_text()
 
 
+def test_too_little_flight_is_refused_before_any_fit_and_a_short_held_out_log_left_out(
+    tmp_path: Path,
+) -> None:
+    """A log of 0.3 s (30 rows) once gave a confident verdict with a zero-width interval; a
+    held-out log too short to use once stopped the whole run after every fit was done."""
+    world = world_file(tmp_path / "world.yaml", vehicle="nano")
+    true = {"thrust_mass": np.array([-0.1])}
+    short = write_flights(tmp_path / "short", NANO, world, true, seeds=(5,), seconds=0.3)
+    with pytest.raises(ConfigError, match=r"too little flight to fit: .*at least 4 s in all.*"
+                       r"f5: 0\.30 s airborne"):  # fmt: skip
+        run_diagnosis(short, [], str(world), tmp_path / "refused", replay=False, candidates=FEW)
+    assert not (tmp_path / "refused").exists()  # refused before anything was written
+    fit = write_flights(tmp_path / "logs", NANO, world, true, seeds=(0, 1), seconds=6.0)
+    result = run_diagnosis(fit, short, str(world), tmp_path / "out", folds=2, replay=False,
+                           candidates=FEW)  # fmt: skip
+    notes = " ".join(result["notes"])
+    assert "left out: f5: 0.30 s airborne and usable, under the 1 s a flight needs" in notes
+    figures = json.loads((tmp_path / "out/gap.json").read_text())
+    assert figures["chosen"]["thrust_mass"][0] == pytest.approx(-0.1, abs=0.01)
+    assert "NaN" not in (tmp_path / "out/gap.json").read_text()
+
+
 # 4. a catalogue that scales with the vehicle --------------------------------------------------
 
 

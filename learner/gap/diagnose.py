@@ -61,6 +61,9 @@ class Diagnosis:
     z_offsets_m: dict[str, float] = field(default_factory=dict)  # log -> z shifted by (m)
 
 
+# Enough flight before any fit: the intervals rest on blocks of 1 s (and 5 s) of flight
+MIN_FLIGHT_S = 1.0  # a flight's airborne, usable time; a shorter one is left out with a note
+MIN_TOTAL_S = 4.0  # the fitting flights' together; less is refused, saying what is missing
 # What a diagnosis does, in the order it does it (`diagnose`'s `on_stage`)
 STAGES = (
     "levelling and preparing the logs",
@@ -152,8 +155,10 @@ def diagnose(
     nominal = nominal_values(world.effects, vehicle)
     leveled, level_notes, z_offsets = level_logs(fitting + held_out, world, vehicle, z_offset_m)
     fitting, held_out = leveled[: len(fitting)], leveled[len(fitting) :]
-    fit_data = [prepare(log, world, vehicle) for log in fitting]
-    hold_data = [prepare(log, world, vehicle) for log in held_out]
+    fit_data, fit_dropped = usable_flights(fitting, world, vehicle)
+    hold_data, hold_dropped = usable_flights(held_out, world, vehicle)
+    enough_data(fit_data, fit_dropped)
+    level_notes = level_notes + [f"left out: {why}" for why in fit_dropped + hold_dropped]
     problem = _problem(fit_data, nominal, vehicle)
     hold_res = [residual_n(d, nominal, vehicle) for d in hold_data]
     check_plausible([d.name for d in fit_data + hold_data], problem.residuals + hold_res, vehicle)
@@ -233,6 +238,47 @@ def diagnose(
         unexplained=unexplained,
         learned_model=left.model,
         z_offsets_m=z_offsets,
+    )
+
+
+def airborne_s(d: FlightData) -> float:
+    """The usable airborne time of a prepared flight (its rows at its median period)."""
+    return len(d.time_s) * d.dt_s
+
+
+def usable_flights(
+    logs: list[FlightLog], world: World, vehicle: Vehicle
+) -> tuple[list[FlightData], list[str]]:
+    """The logs prepared, those with at least MIN_FLIGHT_S airborne and usable; a sentence for
+    each one left out (a flight too short to carry a block of evidence is no flight)."""
+    kept, dropped = [], []
+    for log in logs:
+        try:
+            d = prepare(log, world, vehicle)
+        except ValueError as err:
+            dropped.append(str(err))
+            continue
+        if airborne_s(d) < MIN_FLIGHT_S:
+            dropped.append(
+                f"{d.name}: {airborne_s(d):.2f} s airborne and usable, under the "
+                f"{MIN_FLIGHT_S:g} s a flight needs"
+            )
+            continue
+        kept.append(d)
+    return kept, dropped
+
+
+def enough_data(fit: list[FlightData], dropped: list[str]) -> None:
+    """Refuse, saying what is missing, before any fit on too little: the intervals rest on
+    blocks of a second or more of flight, so fewer than MIN_TOTAL_S of them mean nothing."""
+    total = sum(airborne_s(d) for d in fit)
+    if total >= MIN_TOTAL_S:
+        return
+    have = ", ".join(f"{d.name} {airborne_s(d):.2f} s" for d in fit) or "none usable"
+    raise ValueError(
+        f"too little flight to fit: the fitting logs hold {total:.2f} s airborne and usable "
+        f"({have}); at least {MIN_TOTAL_S:g} s in all is needed, each flight at least "
+        f"{MIN_FLIGHT_S:g} s" + (f"; left out: {'; '.join(dropped)}" if dropped else "")
     )
 
 

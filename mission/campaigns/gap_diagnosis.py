@@ -108,7 +108,8 @@ def _run(
         corrected = out / "corrected_world.yaml"
         corrected.write_text(corrected_world_yaml(flown_world.read_text(), diagnosis))
         on_stage(REPLAYING)
-        closed_loop = replay_missions(hold_logs, flown_world, corrected, out / "replays")
+        kept = [log for log in hold_logs if log.name in diagnosis.held_out]  # usable ones
+        closed_loop = replay_missions(kept, flown_world, corrected, out / "replays")
     else:
         closed_loop = {"status": "skipped", "why": "not asked for (--no-replay)"}
     on_stage(WRITING)
