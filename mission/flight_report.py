@@ -153,8 +153,8 @@ def answers(summary: dict[str, Any], meta: dict[str, Any], s: Series) -> dict[st
         learner: dict[str, Any] = {
             "method": method,
             **{k: summary.get(f"online_{k}") for k in
-               ("updates", "accepted", "rejected", "version", "loss_first", "loss_last",
-                "reject_reasons", "ground", "grounds")},
+               ("updates", "accepted", "rejected", "held", "version", "loss_first",
+                "loss_last", "reject_reasons", "ground", "grounds")},
         }  # fmt: skip
         why = learner["reject_reasons"] or {}
         reasons = "; ".join(f"{k}: {v}" for k, v in why.items())
@@ -162,6 +162,12 @@ def answers(summary: dict[str, Any], meta: dict[str, Any], s: Series) -> dict[st
             f"online {method}: {learner['updates']} updates, {learner['accepted']} accepted, "
             f"{learner['rejected']} rejected; weights version {learner['version']}"
             + (f" (rejected for {reasons})" if reasons else "")
+            + (
+                f"; {learner['held']} held: the evidence for a change under its confidence "
+                "threshold"
+                if learner.get("held")
+                else ""
+            )
             + (f"; active ground {learner['ground']}" if learner.get("ground") else "")
         )
     else:

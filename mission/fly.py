@@ -282,12 +282,14 @@ def _online_lines(summary: dict[str, Any]) -> list[str]:
     loss = "" if first is None or last is None else f"; loss {first:.3g} -> {last:.3g}"
     reasons = summary.get("online_reject_reasons") or {}
     why = ", ".join(f"{k} {v}" for k, v in reasons.items())
+    held = summary.get("online_held")
+    held_text = f"{held} held (evidence under the confidence threshold), " if held else ""
     return [
         f"  online learning ({method}, {summary.get('online_mode')}): "
         f"{summary.get('online_samples', 0)} samples, {summary.get('online_updates', 0)} "
         f"updates, {summary.get('online_accepted', 0)} accepted, "
         f"{summary.get('online_rejected', 0)} rejected{f' ({why})' if why else ''}, "
-        f"weights version {summary.get('online_version', 0)}{loss}",
+        f"{held_text}weights version {summary.get('online_version', 0)}{loss}",
         *[f"  online learning: {e}" for e in summary.get("online_errors") or []],
     ]
 

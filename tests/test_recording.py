@@ -371,3 +371,36 @@ def test_the_layout_shows_data_in_every_view_and_tells_its_series_apart(flown):
     z_view = next(v for v in views if v.name.startswith("z and"))
     low, high = z_view.y_range
     assert -0.2 < low <= log[:, 3].min() and log[:, 3].max() <= high < 2.0
+
+
+def test_the_report_says_what_the_learner_did_and_why_it_published_little():
+    """A composite flight that held most updates back says so on its page; an offline one
+    says it did not learn; no answer prints nan."""
+    import numpy as np
+
+    from mission.flight_report import Series, answers
+
+    n = 200
+    t = np.arange(n) * 0.004
+    zeros = np.zeros(0)
+    near = np.zeros(n, bool)
+    near[100:] = True
+    s = Series(t, np.full(n, 0.031), np.full(n, 0.03), np.full(n, 0.031), near, t,
+               np.full(n, 0.002), zeros, np.zeros((0, 4)), zeros, zeros, zeros, zeros)  # fmt: skip
+    summary = {"landed": True, "ended": "landed", "landing_error_m": 0.0012,
+               "touchdown_speed_m_s": 0.08, "model": "neural", "online_method": "composite",
+               "online_updates": 123, "online_accepted": 9, "online_rejected": 0,
+               "online_held": 114, "online_version": 9, "online_ground": "learnt-1"}  # fmt: skip
+    a = answers(summary, {"online": "composite"}, s)
+    assert "123 updates, 9 accepted" in a["learner"]["text"]
+    assert (
+        "114 held: the evidence for a change under its confidence threshold" in a["learner"]["text"]
+    )
+    assert a["hold"]["rms_mm"] == pytest.approx(1.0) and a["model"]["hold_rms_mn"] == 2.0
+    offline = answers({"landed": False, "ended": "stopped"}, {"online": "off"}, s)
+    assert (
+        offline["learner"]["method"] is None
+        and "did not land: stopped" in offline["landing"]["text"]
+    )
+    texts = " ".join(x["text"] for x in (*a.values(), *offline.values()))
+    assert "nan" not in texts and "ESC" in offline["rotors"]["text"]
