@@ -5,6 +5,7 @@ Both the simulator and the autopilot read this; it is the one place for the vehi
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
@@ -99,3 +100,16 @@ def load_vehicle(name_or_path: str | Path = "nano") -> Vehicle:
 def nano_vehicle() -> Vehicle:
     """The thesis's nano quadrotor: the vehicle the effects' defaults are stated for."""
     return load_vehicle("nano")
+
+
+def vehicle_fields(vehicle: Vehicle) -> dict[str, object]:
+    """A vehicle as the plain mapping of its YAML file (tuples as lists)."""
+    return {
+        f.name: list(v) if isinstance(v := getattr(vehicle, f.name), tuple) else v
+        for f in dataclasses.fields(vehicle)
+    }
+
+
+def with_fields(vehicle: Vehicle, where: str, **fields: object) -> Vehicle:
+    """`vehicle` with `fields` replaced, checked as a vehicle file's are (range, unit)."""
+    return build(Vehicle, {**vehicle_fields(vehicle), **fields}, where)

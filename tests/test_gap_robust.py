@@ -281,6 +281,29 @@ def test_too_little_flight_is_refused_before_any_fit_and_a_short_held_out_log_le
     assert "NaN" not in (tmp_path / "out/gap.json").read_text()
 
 
+def test_a_vehicle_of_another_mass_is_given_with_mass_not_a_copy_of_its_file(
+    tmp_path: Path,
+) -> None:
+    """Logs of a nano 10% heavier: read as the nano, the extra weight is named as a thrust
+    and mass group; with `--mass` the same logs leave nothing to name, and the replays' world
+    flies that vehicle."""
+    world = world_file(tmp_path / "world.yaml", vehicle="nano")
+    heavy = dataclasses.replace(NANO, mass_kg=NANO.mass_kg * 1.1)
+    fit = write_flights(tmp_path / "logs", heavy, world, {}, seeds=(0, 1), seconds=6.0)
+    as_nano = run_diagnosis(fit, [], str(world), tmp_path / "nano", folds=2, replay=False,
+                            candidates=FEW)  # fmt: skip
+    # thrust per unit mass 1/1.1 of what the nano's file says
+    assert as_nano["chosen"]["thrust_mass"][0] == pytest.approx(1 / 1.1 - 1, abs=0.01)
+    given = run_diagnosis(fit, [], str(world), tmp_path / "given", folds=2, replay=False,
+                          candidates=FEW, mass_kg=heavy.mass_kg)  # fmt: skip
+    assert "thrust_mass" not in given["chosen"]
+    flown = yaml.safe_load((tmp_path / "given/nominal_world.yaml").read_text())
+    assert load_vehicle(flown["vehicle"]).mass_kg == pytest.approx(heavy.mass_kg)
+    assert any("(--mass)" in note for note in given["notes"])
+    with pytest.raises(ConfigError, match=r"--mass.mass_kg: -1 is outside the allowed range"):
+        run_diagnosis(fit, [], str(world), tmp_path / "bad", replay=False, mass_kg=-1.0)
+
+
 # 4. a catalogue that scales with the vehicle --------------------------------------------------
 
 

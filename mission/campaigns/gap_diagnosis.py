@@ -22,7 +22,13 @@ from learner.gap.report import corrected_world_yaml, figures, write_outputs
 from learner.gap.rollout import shrink, tracking_difference_m
 from mission.campaigns.gap_flights import fly_log
 from simbridge.config import ConfigError
-from simbridge.vehicle import Vehicle, load_vehicle, resolve_vehicle_path
+from simbridge.vehicle import (
+    Vehicle,
+    load_vehicle,
+    resolve_vehicle_path,
+    vehicle_fields,
+    with_fields,
+)
 from simbridge.world import World, load_world, resolve_world_path
 
 READING = "reading the logs"
@@ -43,13 +49,15 @@ def run_diagnosis(
     z_offset_m: float | None = None,
     candidates: list[str] | None = None,
     progress: bool = False,
+    mass_kg: float | None = None,
 ) -> dict[str, Any]:
     """Diagnose, replay held-out missions closed-loop, write every output; the figures.
     The vehicle is `vehicle_name`, else the world's `vehicle:` (the simulator's, nano by
     default); a `vehicle_name` other than the world's is refused. `z_offset_m`: subtracted
     from every log's z (default: found from where each flight rests on the ground);
     `candidates`: the catalogue candidates the search may choose (default: all); `progress`:
-    a bar on stderr naming each stage (on a terminal)."""
+    a bar on stderr naming each stage (on a terminal); `mass_kg`: the vehicle's mass over
+    its file's (the replays fly the vehicle with it)."""
     if folds < 2:
         raise ConfigError(f"--folds: {folds} is outside the allowed range [2, number of logs]")
     try:
@@ -65,7 +73,7 @@ def run_diagnosis(
             bar.set_description_str(stage)
 
         result = _run(fitting, held_out, world, out, folds, columns, vehicle_name, replay,
-                      z_offset_m, candidates, on_stage)  # fmt: skip
+                      z_offset_m, candidates, on_stage, mass_kg)  # fmt: skip
         bar.update(len(stages) - bar.n)
     return result
 
@@ -82,12 +90,15 @@ def _run(
     z_offset_m: float | None,
     candidates: list[str] | None,
     on_stage: Callable[[str], None],
+    mass_kg: float | None,
 ) -> dict[str, Any]:
     on_stage(READING)
     mapping = load_mapping(columns)
     world_path = resolve_world_path(world)
     world_obj = load_world(world_path)
     vehicle = resolve_vehicle(world_path, world_obj, vehicle_name)
+    if mass_kg is not None:
+        vehicle = with_fields(vehicle, "--mass", mass_kg=mass_kg)
     # the vehicle turns logged thrust into rotor speeds (its C_T)
     fit_logs = [read_log(p, mapping, vehicle) for p in fitting]
     hold_logs = [read_log(p, mapping, vehicle) for p in held_out]
@@ -98,8 +109,16 @@ def _run(
     except ValueError as err:
         raise ConfigError(str(err)) from None
     out.mkdir(parents=True, exist_ok=True)
-    flown_world = world_with_vehicle(world_path, vehicle_name, out)
-    if flown_world != world_path:
+    if mass_kg is not None:
+        flown_world = world_with_vehicle_file(world_path, vehicle, out)
+        diagnosis.notes.append(
+            f"the vehicle: {vehicle.name} at {mass_kg:g} kg (--mass), written to "
+            f"{flown_world.parent / VEHICLE_FILE}, which {flown_world.name} (the world the "
+            "replays fly) and corrected_world.yaml name"
+        )
+    else:
+        flown_world = world_with_vehicle(world_path, vehicle_name, out)
+    if mass_kg is None and flown_world != world_path:
         diagnosis.notes.append(
             f"the world names no vehicle: `vehicle: {vehicle_name}` is added to "
             f"{flown_world.name} (the world the replays fly) and corrected_world.yaml"
@@ -150,6 +169,21 @@ def world_with_vehicle(world_path: Path, vehicle_name: str | None, out: Path) ->
     data = yaml.safe_load(world_path.read_text()) or {}
     vehicle_path = resolve_vehicle_path(vehicle_name)
     data["vehicle"] = str(vehicle_path.resolve()) if vehicle_path.exists() else vehicle_name
+    path = out / "nominal_world.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+VEHICLE_FILE = "vehicle.yaml"
+
+
+def world_with_vehicle_file(world_path: Path, vehicle: Vehicle, out: Path) -> Path:
+    """A copy of the world whose `vehicle:` is `vehicle`, written beside it in `out` (a vehicle
+    changed on the command line, which the simulator must fly too)."""
+    vehicle_path = out / VEHICLE_FILE
+    vehicle_path.write_text(yaml.safe_dump(vehicle_fields(vehicle), sort_keys=False))
+    data = yaml.safe_load(world_path.read_text()) or {}
+    data["vehicle"] = str(vehicle_path.resolve())
     path = out / "nominal_world.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path

@@ -37,6 +37,11 @@ def add_parser(sub: Any) -> None:
         "a vehicle other than the world's is refused)",
     )
     d.add_argument(
+        "--mass", type=float, metavar="KG",
+        help="the vehicle's mass, kg, over its file's (a packaged vehicle of another weight "
+        "without a copy of its YAML); the replays fly it too",
+    )  # fmt: skip
+    d.add_argument(
         "--z-offset", type=float, metavar="M",
         help="subtract M from every log's z, m (the logs' frame puts the world's ground at "
         "z = M less the vehicle's resting height); default: found from where each flight "
@@ -80,6 +85,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         args.logs, args.holdout, args.world, args.out, args.folds, args.columns, args.vehicle,
         not args.no_replay, args.z_offset,
         args.candidates.split(",") if args.candidates else None, progress=True,
+        mass_kg=args.mass,
     )  # fmt: skip
     for effect, e in result["effects"].items():
         params = ", ".join(f"{p} {v['value']:.4g}" for p, v in (e.get("parameters") or {}).items())
