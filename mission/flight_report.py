@@ -24,11 +24,7 @@ from autopilot.metrics import NEAR_GROUND_M, settled_halves
 
 PNG_SUFFIX = ".report.png"
 JSON_SUFFIX = ".report.json"
-QUESTIONS = ("landing", "hold", "model", "learner", "rotors")
-# the model error's axis is scaled to the hold near the ground: a take-off transient (about
-# 1 N) would otherwise flatten the 0.1-0.2 N hold to a line
-MODEL_AXIS_MARGIN = 1.5
-ROTOR_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
+QUESTIONS = ("landing", "hold", "model", "learner", "rotors")  # the answers' keys, in order
 
 
 @dataclass(frozen=True)
@@ -185,4 +181,5 @@ def answers(summary: dict[str, Any], meta: dict[str, Any], s: Series) -> dict[st
         if len(d)
         else "no measured rotor speeds (ESC telemetry) in the recording"
     )
-    return {"landing": landing, "hold": hold, "model": model, "learner": learner, "rotors": rotors}
+    found = {"landing": landing, "hold": hold, "model": model, "learner": learner, "rotors": rotors}
+    return {k: found[k] for k in QUESTIONS}

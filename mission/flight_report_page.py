@@ -12,8 +12,7 @@ import numpy as np
 
 from autopilot.metrics import settled_halves
 from mission.flight_report import (
-    MODEL_AXIS_MARGIN,
-    ROTOR_COLORS,
+    QUESTIONS,
     Series,
     answers,
     online_method,
@@ -21,6 +20,10 @@ from mission.flight_report import (
     report_paths,
 )
 
+# the model error's axis is scaled to the hold near the ground: a take-off transient (about
+# 1 N) would otherwise flatten the 0.1-0.2 N hold to a line
+MODEL_AXIS_MARGIN = 1.5
+ROTOR_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
 LANDING_WINDOW_S = 4.0  # the landing panel: the last seconds before touchdown
 DPI = 90
 
@@ -157,7 +160,7 @@ def _rotors(ax: Any, a: dict[str, Any], s: Series) -> None:
 def _text(ax: Any, answers: dict[str, Any]) -> None:
     ax.axis("off")
     lines = []
-    for k, name in enumerate(("landing", "hold", "model", "learner", "rotors"), start=1):
+    for k, name in enumerate(QUESTIONS, start=1):
         lines.append(textwrap.fill(f"{k}. {answers[name]['text']}", 64))
     ax.text(0.0, 1.0, "\n\n".join(lines), va="top", fontsize=9.5)
 
