@@ -78,11 +78,16 @@ def ge_error_metrics(pairs: np.ndarray) -> dict[str, float | None]:
     }
 
 
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of every run of True in `mask`, stop exclusive."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    return [(int(a), int(b)) for a, b in zip(edges[0::2], edges[1::2], strict=True)]
+
+
 def settled_halves(mask: np.ndarray) -> np.ndarray:
     """The second half of every run of True in `mask`: a hold once the approach has settled."""
     out = np.zeros_like(mask)
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
-    for start, stop in zip(edges[0::2], edges[1::2], strict=True):
+    for start, stop in runs(mask):
         out[(start + stop) // 2 : stop] = True
     return out
 

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from autopilot.metrics import settled_halves
+from autopilot.metrics import runs, settled_halves
 from mission.flight_report import (
     QUESTIONS,
     Series,
@@ -54,15 +54,35 @@ def _answer(ax: Any, text: str) -> None:
             bbox=box, zorder=5)  # fmt: skip
 
 
+def _frame(ax: Any, title: str, ylabel: str, empty: str | None = None) -> bool:
+    """A panel's title and axes; with `empty` (the answer when there is no data) that text
+    alone, centred. Whether there is data to draw."""
+    ax.set_title(title, loc="left")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    if empty is None:
+        return True
+    ax.text(0.5, 0.5, textwrap.fill(empty, 60), transform=ax.transAxes, ha="center")
+    return False
+
+
+def _clip(ax: Any, values: np.ndarray, bound: float, note: str) -> None:
+    """Scale the axis to +-`bound` when `values` go beyond it, saying what runs off (`note`,
+    with the largest value as `{largest}`)."""
+    largest = float(np.max(np.abs(values)))
+    if largest > bound:
+        ax.set_ylim(-bound, bound)
+        text = note.format(largest=largest)
+        ax.text(0.98, 0.03, text, transform=ax.transAxes, ha="right", fontsize=8)
+
+
 def _landing(ax: Any, a: dict[str, Any], s: Series) -> None:
     """1. Height above the surface over the last seconds: the touchdown, its speed."""
+    _frame(ax, "1. Did it land, where and how?", "height (mm)")
     end = s.time_s[-1] if len(s.time_s) else 0.0
     last = s.time_s >= end - LANDING_WINDOW_S
     ax.plot(s.time_s[last], s.height_m[last] * 1e3, color="#1f77b4", label="height above surface")
-    ax.set_ylabel("height (mm)")
-    ax.set_xlabel("time (s)")
-    ax.set_title("1. Did it land, where and how?", loc="left")
-    ax.grid(True, alpha=0.3)
     if a.get("touchdown_time_s") is not None:
         ax.axvline(a["touchdown_time_s"], color="#2ca02c", ls="--", lw=1, label="touchdown")
         ax.legend(loc="lower left", fontsize=8)
@@ -71,38 +91,33 @@ def _landing(ax: Any, a: dict[str, Any], s: Series) -> None:
 
 def _hold(ax: Any, a: dict[str, Any], s: Series) -> None:
     """2. Height error near the ground in millimetres, on its own axis."""
-    ax.set_title("2. How well did it hold near the ground?", loc="left")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("height error, flown minus setpoint (mm)")
-    ax.grid(True, alpha=0.3)
-    if not s.near_hold.any():
-        ax.text(0.5, 0.5, a["text"], transform=ax.transAxes, ha="center")
+    title, ylabel = (
+        "2. How well did it hold near the ground?",
+        "height error, flown minus setpoint (mm)",
+    )
+    if not _frame(ax, title, ylabel, None if s.near_hold.any() else a["text"]):
         return
     t = np.where(s.near_hold, s.time_s, np.nan)  # gaps between holds left open
     error = (s.z_m - s.z_setpoint_m) * 1e3
     ax.plot(t, error, color="#d62728")
     ax.axhline(0.0, color="grey", lw=0.8)
     settled = settled_halves(s.near_hold)
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], settled.astype(np.int8), [0]))))
-    for start, stop in zip(edges[0::2], edges[1::2], strict=True):
+    for start, stop in runs(settled):
         ax.axvspan(s.time_s[start], s.time_s[stop - 1], color="#2ca02c", alpha=0.08)
     if settled.any():  # scaled to the settled hold; the approach runs off the top
         bound = max(float(np.max(np.abs(error[settled]))) * 3.0, 1.0)
-        if np.max(np.abs(error[s.near_hold])) > bound:
-            ax.set_ylim(-bound, bound)
-            ax.text(0.98, 0.03, "shaded: the settled half, scored; the approach runs off the axis",
-                    transform=ax.transAxes, ha="right", fontsize=8)  # fmt: skip
+        _clip(ax, error[s.near_hold], bound,
+              "shaded: the settled half, scored; the approach runs off the axis")  # fmt: skip
     _answer(ax, a["text"])
 
 
 def _model(ax: Any, a: dict[str, Any], s: Series) -> None:
     """3. Predicted minus true ground effect (mN), scaled to the hold, not the take-off."""
-    ax.set_title("3. How good was the ground-effect model?", loc="left")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("model error, predicted minus true (mN)")
-    ax.grid(True, alpha=0.3)
-    if not len(s.ge_time_s):
-        ax.text(0.5, 0.5, a["text"], transform=ax.transAxes, ha="center")
+    title, ylabel = (
+        "3. How good was the ground-effect model?",
+        "model error, predicted minus true (mN)",
+    )
+    if not _frame(ax, title, ylabel, None if len(s.ge_time_s) else a["text"]):
         return
     error = s.ge_error_n * 1e3
     ax.plot(s.ge_time_s, error, color="#9467bd")
@@ -110,25 +125,19 @@ def _model(ax: Any, a: dict[str, Any], s: Series) -> None:
     in_hold = np.interp(s.ge_time_s, s.time_s, s.near_hold.astype(float)) > 0.5
     scale = error[in_hold] if in_hold.any() else error
     bound = max(float(np.max(np.abs(scale))) * MODEL_AXIS_MARGIN, 1.0)
-    if np.max(np.abs(error)) > bound:
-        ax.set_ylim(-bound, bound)
-        ax.text(0.98, 0.05, f"clipped: the largest, {np.max(np.abs(error)):.0f} mN, at take-off "
-                "or touchdown", transform=ax.transAxes, ha="right", fontsize=8)  # fmt: skip
+    _clip(ax, error, bound,
+          "clipped: the largest, {largest:.0f} mN, at take-off or touchdown")  # fmt: skip
     _answer(ax, a["text"])
 
 
 def _learner(ax: Any, a: dict[str, Any], s: Series) -> None:
     """4. The learner's loss on a log axis and its published weights' version."""
-    ax.set_title("4. What did the learner do?", loc="left")
-    ax.set_xlabel("time (s)")
-    ax.grid(True, alpha=0.3)
-    if not len(s.loss_time_s):
-        ax.text(0.5, 0.5, textwrap.fill(a["text"], 60), transform=ax.transAxes, ha="center")
+    title, ylabel = "4. What did the learner do?", "loss of each update (standardised, log)"
+    if not _frame(ax, title, ylabel, None if len(s.loss_time_s) else a["text"]):
         ax.set_xticks([])
         ax.set_yticks([])
         return
     ax.semilogy(s.loss_time_s, np.maximum(s.loss, 1e-12), ".", color="#d62728", label="loss")
-    ax.set_ylabel("loss of each update (standardised, log)")
     if len(s.version_time_s):
         twin = ax.twinx()
         twin.step(s.version_time_s, s.version, where="post", color="#1f77b4", label="version")
@@ -138,22 +147,16 @@ def _learner(ax: Any, a: dict[str, Any], s: Series) -> None:
 
 def _rotors(ax: Any, a: dict[str, Any], s: Series) -> None:
     """5. Each rotor its own colour: commanded minus measured."""
-    ax.set_title("5. Rotors: commanded minus measured", loc="left")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("rotor speed difference (rad/s)")
-    ax.grid(True, alpha=0.3)
-    if not len(s.rotor_time_s):
-        ax.text(0.5, 0.5, a["text"], transform=ax.transAxes, ha="center")
+    title, ylabel = "5. Rotors: commanded minus measured", "rotor speed difference (rad/s)"
+    if not _frame(ax, title, ylabel, None if len(s.rotor_time_s) else a["text"]):
         return
     d = s.rotor_difference_rad_s
     for i, color in enumerate(ROTOR_COLORS):
         ax.plot(s.rotor_time_s, d[:, i], color=color, lw=0.8, label=f"rotor {i}")
     # scaled to the flight, not to the spin-up and touchdown spikes
     bound = max(float(np.percentile(np.abs(d), 99.0)) * 3.0, 1.0)
-    if np.max(np.abs(d)) > bound:
-        ax.set_ylim(-bound, bound)
-        ax.text(0.98, 0.03, f"clipped: the largest, {np.max(np.abs(d)):.0f} rad/s, at spin-up "
-                "or touchdown", transform=ax.transAxes, ha="right", fontsize=8)  # fmt: skip
+    _clip(ax, d, bound,
+          "clipped: the largest, {largest:.0f} rad/s, at spin-up or touchdown")  # fmt: skip
     ax.legend(loc="upper right", ncol=4, fontsize=8)
 
 

@@ -118,11 +118,11 @@ def _run(
         )
     else:
         flown_world = world_with_vehicle(world_path, vehicle_name, out)
-    if mass_kg is None and flown_world != world_path:
-        diagnosis.notes.append(
-            f"the world names no vehicle: `vehicle: {vehicle_name}` is added to "
-            f"{flown_world.name} (the world the replays fly) and corrected_world.yaml"
-        )
+        if flown_world != world_path:
+            diagnosis.notes.append(
+                f"the world names no vehicle: `vehicle: {vehicle_name}` is added to "
+                f"{flown_world.name} (the world the replays fly) and corrected_world.yaml"
+            )
     if replay:
         corrected = out / "corrected_world.yaml"
         corrected.write_text(corrected_world_yaml(flown_world.read_text(), diagnosis))
