@@ -189,6 +189,17 @@ def world_with_vehicle_file(world_path: Path, vehicle: Vehicle, out: Path) -> Pa
     return path
 
 
+# a replay may fly this many times the logged flight, plus a margin for the take-off and the
+# landing a log leaves out, and at least REPLAY_MIN_S, before it is called one that cannot land
+REPLAY_TIME_FACTOR, REPLAY_MARGIN_S, REPLAY_MIN_S = 2.0, 10.0, 30.0
+
+
+def replay_limit_s(log: Any) -> float:
+    """How many simulated seconds a replay of `log`'s mission may fly."""
+    logged_s = float(log.time_s[-1] - log.time_s[0]) if len(log) else 0.0
+    return max(REPLAY_MIN_S, REPLAY_TIME_FACTOR * logged_s + REPLAY_MARGIN_S)
+
+
 def replay_missions(logs: list, nominal: Path, corrected: Path, out: Path) -> dict[str, Any]:
     """Fly each held-out log's mission in the nominal and the corrected world; the RMS
     tracking difference to the logged flight before and after. A flight that fails (the
@@ -213,7 +224,9 @@ def replay_missions(logs: list, nominal: Path, corrected: Path, out: Path) -> di
             ("corrected", corrected, f"{log.name}-corrected-{key}.csv"),
         ):
             try:
-                flown[label] = read_log(fly_log(Path(mission), world, out / name))
+                flown[label] = read_log(
+                    fly_log(Path(mission), world, out / name, max_flight_s=replay_limit_s(log))
+                )
             except Exception as err:  # any failure of one flight is a figure, not the end
                 failed.append(
                     {"flight": log.name, "world": label, "reason": f"{type(err).__name__}: {err}"}

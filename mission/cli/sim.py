@@ -115,19 +115,22 @@ def cmd_sim(args: argparse.Namespace) -> int:
             low_latency_idle=args.low_latency_idle,
         ),
     )
-    try:
-        url = server.listen()
-    except OSError as err:
-        where = f"unix:{args.unix}" if args.unix else f"tcp:{args.host}:{args.port}"
-        print(f"groundfx sim: cannot listen on {where}: {err.strerror}", file=sys.stderr)
-        return 1
-    print(f"groundfx sim: listening on {url}", flush=True)
+    # before it says it listens: a launcher may stop it as soon as it has read that line
     signal.signal(signal.SIGTERM, terminate)
     # Ctrl-C even where SIGINT came in ignored (a script's background job, nohup): Python then
     # leaves it ignored, and a simulator told to stop would run on
     signal.signal(signal.SIGINT, signal.default_int_handler)
     faulthandler.register(signal.SIGUSR1)  # `kill -USR1 PID`: where each thread is, on stderr
     try:
+        url = server.listen()
+    except OSError as err:
+        where = f"unix:{args.unix}" if args.unix else f"tcp:{args.host}:{args.port}"
+        print(f"groundfx sim: cannot listen on {where}: {err.strerror}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 0
+    try:
+        print(f"groundfx sim: listening on {url}", flush=True)
         end = server.serve(lambda e: print(f"groundfx sim: {server.summary(str(e))}", flush=True))
     except KeyboardInterrupt:
         end = LinkEnded("stopped by signal")
