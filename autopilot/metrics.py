@@ -31,10 +31,7 @@ def flight_metrics(
         log[:, 7],
         log[:, 8],
     )
-    mode = log[:, 9].astype(int)
-    setpoint_height = zd - z + height  # the setpoint above the surface under the vehicle
-    holding = (mode == modes.index("holding")) & (setpoint_height <= NEAR_GROUND_M)
-    near = settled_halves(holding)
+    near = near_ground_hold(log, modes)
     out: dict[str, float | None] = {
         "hold_z_rms_error_m": float(np.sqrt(np.mean((z[near] - zd[near]) ** 2)))
         if near.any()
@@ -63,18 +60,33 @@ def flight_metrics(
     return out
 
 
-def ge_error_metrics(pairs: np.ndarray) -> dict[str, float | None]:
+def near_ground_hold(log: np.ndarray, modes: list[str]) -> np.ndarray:
+    """The steps of `log` (metrics.COLUMNS) that hold near the ground, once settled."""
+    z, zd, height = log[:, 3], log[:, 7], log[:, 8]
+    setpoint_height = zd - z + height  # the setpoint above the surface under the vehicle
+    holding = (log[:, 9].astype(int) == modes.index("holding")) & (setpoint_height <= NEAR_GROUND_M)
+    return settled_halves(holding)
+
+
+def _rms(values: np.ndarray) -> float | None:
+    return float(np.sqrt(np.mean(values**2))) if len(values) else None
+
+
+def ge_error_metrics(pairs: np.ndarray, hold_times_s: np.ndarray) -> dict[str, float | None]:
     """How well the controller's ground-effect model knew the vertical force in flight: RMS
-    of predicted minus true (the simulator's) over the airborne steps, and over those at least
-    FAR_FROM_GROUND_M up, where the ground effect of rho 1 and rho 2 is under a millinewton: an
-    error there is not the world but the model (a network that forgot what it knew)."""
-    if len(pairs) == 0:
-        return {"ge_z_rms_error_n": None, "ge_z_far_rms_error_n": None}
-    error = pairs[:, 1] - pairs[:, 2]
-    far = pairs[:, 0] >= FAR_FROM_GROUND_M
+    of predicted minus true (the simulator's) over the airborne steps; over the near-ground
+    hold (`hold_times_s`, as `near_ground_hold` finds it), where the model is what holds the
+    vehicle; and over the steps at least FAR_FROM_GROUND_M up, where the ground effect of rho
+    1 and rho 2 is under a millinewton: an error there is not the world but the model (a
+    network that forgot what it knew). With the mean true force over the hold, for scale.
+    `pairs`: (time_s, height_m, predicted_n, true_n)."""
+    error = pairs[:, 2] - pairs[:, 3]
+    hold = np.isin(pairs[:, 0], hold_times_s)
     return {
-        "ge_z_rms_error_n": float(np.sqrt(np.mean(error**2))),
-        "ge_z_far_rms_error_n": float(np.sqrt(np.mean(error[far] ** 2))) if far.any() else None,
+        "ge_z_rms_error_n": _rms(error),
+        "ge_z_hold_rms_error_n": _rms(error[hold]),
+        "ge_z_hold_true_n": float(np.mean(pairs[hold, 3])) if hold.any() else None,
+        "ge_z_far_rms_error_n": _rms(error[pairs[:, 1] >= FAR_FROM_GROUND_M]),
     }
 
 

@@ -426,7 +426,7 @@ def _step(p: Parts, s: LoopState) -> str | None:
     p.trace.correction_timings.append(time.perf_counter() - t_nav)
     truth = step.latest.get("DEBUG_VECT")
     if target is not None and in_the_air and truth is not None:
-        p.trace.ge_pairs.append((estimate.height_m, target[2], truth["z"]))
+        p.trace.ge_pairs.append((t, estimate.height_m, target[2], truth["z"]))
     flying = in_the_air and s.cmd.phase in AIRBORNE_PHASES
     if _sample(p, s, t, step, estimate, cmd.setpoint, applied, flying):
         return "enough samples"

@@ -9,7 +9,13 @@ from typing import Any
 import numpy as np
 
 from autopilot.commander.commander import CommanderState, Phase
-from autopilot.metrics import COLUMNS, flight_metrics, ge_error_metrics, trajectory_sha256
+from autopilot.metrics import (
+    COLUMNS,
+    flight_metrics,
+    ge_error_metrics,
+    near_ground_hold,
+    trajectory_sha256,
+)
 from autopilot.nav_metrics import estimator_metrics
 
 MODES = [p.value for p in Phase]
@@ -25,7 +31,8 @@ class FlightTrace:
     timings: list[float] = field(default_factory=list)  # controller and ground-effect model
     step_timings: list[float] = field(default_factory=list)  # with the estimator's prediction
     correction_timings: list[float] = field(default_factory=list)  # the estimator's fusions
-    ge_pairs: list[tuple[float, float, float]] = field(default_factory=list)  # (h, pred, true)
+    # (t, h, predicted, true): the ground-effect model's vertical force against the truth
+    ge_pairs: list[tuple[float, float, float, float]] = field(default_factory=list)
     nav_errors: list[tuple[float, ...]] = field(default_factory=list)  # in the air
     samples: list[tuple[float, ...]] = field(default_factory=list)  # learner.dataset.COLUMNS
     failsafes: list[str] = field(default_factory=list)
@@ -103,7 +110,9 @@ def flight_figures(
             trajectory_sha256=trajectory_sha256(log),
         )
     summary.update(estimator_metrics(np.asarray(trace.nav_errors).reshape(-1, 7), nav))
-    summary.update(ge_error_metrics(np.asarray(trace.ge_pairs, dtype=float).reshape(-1, 3)))
+    hold_times_s = log[near_ground_hold(log, MODES), 0] if len(log) else np.zeros(0)
+    pairs = np.asarray(trace.ge_pairs, dtype=float).reshape(-1, 4)
+    summary.update(ge_error_metrics(pairs, hold_times_s))
     summary.update(_percentiles("controller", trace.timings))
     summary.update(_percentiles("estimator_controller", trace.step_timings))
     summary.update(_percentiles("estimator_correction", trace.correction_timings))

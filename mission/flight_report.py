@@ -150,17 +150,24 @@ def answers(summary: dict[str, Any], meta: dict[str, Any], s: Series) -> dict[st
             "method": method,
             **{k: summary.get(f"online_{k}") for k in
                ("updates", "accepted", "rejected", "held", "version", "loss_first",
-                "loss_last", "reject_reasons", "ground", "grounds")},
+                "loss_last", "reject_reasons", "ground", "grounds", "held_evidence")},
         }  # fmt: skip
         why = learner["reject_reasons"] or {}
         reasons = "; ".join(f"{k}: {v}" for k, v in why.items())
+        evidence = learner.get("held_evidence")
+        ratios = (
+            f" (likelihood ratio median {evidence['median']:.3g}, largest {evidence['max']:.4g}"
+            f", against {evidence['threshold']:g})"
+            if evidence
+            else ""
+        )
         learner["text"] = (
             f"online {method}: {learner['updates']} updates, {learner['accepted']} accepted, "
             f"{learner['rejected']} rejected; weights version {learner['version']}"
             + (f" (rejected for {reasons})" if reasons else "")
             + (
                 f"; {learner['held']} held: the evidence for a change under its confidence "
-                "threshold"
+                f"threshold{ratios}"
                 if learner.get("held")
                 else ""
             )

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from autopilot.commander.mission_items import Home
+from autopilot.metrics import FAR_FROM_GROUND_M
 from autopilot.request import NO_PARAMS_FILE, FlightRequest
 from autopilot.simlink import LOST
 from mission.gcs_client import GroundStation, GroundStationError, VehicleEnded
@@ -279,11 +280,23 @@ def _online_lines(summary: dict[str, Any]) -> list[str]:
     if method is None or method == "off":
         return [f"  online learning: {e}" for e in summary.get("online_errors") or []]
     first, last = summary.get("online_loss_first"), summary.get("online_loss_last")
-    loss = "" if first is None or last is None else f"; loss {first:.3g} -> {last:.3g}"
+    # each loss is on its own batch (a batch nearer the ground has more to explain): the two
+    # are not a trend of one quantity
+    loss = (
+        ""
+        if first is None or last is None
+        else f"; loss on the first batch {first:.3g}, on the last {last:.3g}"
+    )
     reasons = summary.get("online_reject_reasons") or {}
     why = ", ".join(f"{k} {v}" for k, v in reasons.items())
     held = summary.get("online_held")
-    held_text = f"{held} held (evidence under the confidence threshold), " if held else ""
+    evidence = summary.get("online_held_evidence")
+    held_text = (
+        f"{held} held (likelihood ratio median {evidence['median']:.3g}, largest "
+        f"{evidence['max']:.4g}, against the threshold {evidence['threshold']:g}), "
+        if held and evidence
+        else (f"{held} held (evidence under the confidence threshold), " if held else "")
+    )
     return [
         f"  online learning ({method}, {summary.get('online_mode')}): "
         f"{summary.get('online_samples', 0)} samples, {summary.get('online_updates', 0)} "
@@ -308,6 +321,9 @@ def describe(summary: dict[str, Any]) -> str:
             f"  landing position error      {fmt('landing_error_m', 'mm', 1000)}",
             f"  z error holding near ground {fmt('hold_z_rms_error_m', 'mm', 1000, 2)} RMS, "
             f"{fmt('hold_z_max_error_m', 'mm', 1000, 2)} max",
+            f"  ground-effect model error   {fmt('ge_z_hold_rms_error_n', 'mN', 1000, 2)} RMS "
+            f"over the hold (true force {fmt('ge_z_hold_true_n', 'mN', 1000, 1)}), "
+            f"{fmt('ge_z_far_rms_error_n', 'mN', 1000, 2)} at {FAR_FROM_GROUND_M:g} m and higher",
             f"  touchdown vertical speed    {fmt('touchdown_speed_m_s', 'm/s', 1, 3)}, "
             f"bounce {fmt('bounce_m', 'mm', 1000, 2)}; declared {_declared(summary)}",
             f"  estimator against truth     position {fmt('est_position_rms_m', 'mm', 1000, 2)}"

@@ -124,19 +124,27 @@ def test_composite_needs_a_basis_model():
 def test_flights_with_composite_do_no_harm_at_the_training_rho_and_adapt_at_rho2(tmp_path):
     """Seeded landing trial 0 on the thesis's position PD (where a model error shows in the
     hold): at the training rho the vehicle with `composite` holds no worse than the basis
-    without learning; at rho 2 it holds closer than without learning."""
-    from mission.campaigns.online_eval import CONTROLLERS, hold_error, trial_file, world_file
+    without learning; at rho 2 it holds closer than without learning, and its model of the
+    ground effect is what improved (predicted minus true force over the hold). A flight's
+    summary says why updates published nothing: their likelihood ratios and the threshold."""
+    from mission.campaigns.online_eval import CONTROLLERS, flight_summary, trial_file, world_file
 
     mission, start = trial_file(tmp_path, 0, 10.0)
     pd = tuple(a for p in CONTROLLERS["thesis"] for a in ("--param", p))
     online = ("--online", "composite")
-    errors = {}
+    flights = {}
     for rho in (1.0, 2.0):
         world = world_file(tmp_path, rho)
-        offline = hold_error(mission, start, world, "neural", rho, "grounds", *pd)
-        learning = hold_error(mission, start, world, "neural", rho, "grounds", *online, *pd)
-        errors[rho] = (offline, learning)
+        offline = flight_summary(mission, start, world, "neural", rho, "grounds", *pd)
+        learning = flight_summary(mission, start, world, "neural", rho, "grounds", *online, *pd)
+        flights[rho] = (offline, learning)
+    errors = {rho: tuple(f["hold_z_rms_error_m"] for f in pair) for rho, pair in flights.items()}
     offline, learning = errors[1.0]
     assert learning <= offline * 1.1 + 0.5e-3, errors
     offline, learning = errors[2.0]
     assert learning < 0.5 * offline, errors
+    model = {rho: tuple(f["ge_z_hold_rms_error_n"] for f in pair) for rho, pair in flights.items()}
+    assert model[2.0][1] < 0.5 * model[2.0][0], model
+    for _, learnt in flights.values():
+        evidence = learnt["online_held_evidence"]
+        assert learnt["online_held"] == 0 or evidence["max"] <= evidence["threshold"], learnt

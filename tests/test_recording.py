@@ -390,11 +390,14 @@ def test_the_report_says_what_the_learner_did_and_why_it_published_little():
     summary = {"landed": True, "ended": "landed", "landing_error_m": 0.0012,
                "touchdown_speed_m_s": 0.08, "model": "neural", "online_method": "composite",
                "online_updates": 123, "online_accepted": 9, "online_rejected": 0,
-               "online_held": 114, "online_version": 9, "online_ground": "learnt-1"}  # fmt: skip
+               "online_held": 114, "online_version": 9, "online_ground": "learnt-1",
+               "online_held_evidence": {"median": 0.24, "max": 29.97,
+                                        "threshold": 30.0}}  # fmt: skip
     a = answers(summary, {"online": "composite"}, s)
     assert "123 updates, 9 accepted" in a["learner"]["text"]
     assert (
-        "114 held: the evidence for a change under its confidence threshold" in a["learner"]["text"]
+        "114 held: the evidence for a change under its confidence threshold (likelihood ratio "
+        "median 0.24, largest 29.97, against 30)" in a["learner"]["text"]
     )
     assert a["hold"]["rms_mm"] == pytest.approx(1.0) and a["model"]["hold_rms_mn"] == 2.0
     offline = answers({"landed": False, "ended": "stopped"}, {"online": "off"}, s)

@@ -13,7 +13,8 @@ the learner's bursts.
 Protocol over one duplex pipe (pickled tuples). Parent to learner: ("samples", rows),
 ("reset", t_s), ("configure", settings), ("close",). Learner to parent: ("ready",),
 ("snapshot", version, weights, biases, t_s, loss), ("rejected", t_s, loss), ("reset",
-version, t_s), ("error", text) and, last, ("summary", counts, reject_reasons, last_loss).
+version, t_s), ("error", text) and, last, ("summary", counts, reject_reasons, last_loss,
+held_evidence).
 A row is t, the 12 features, the 3 targets, the position loop's vertical composite error
 (`composite`'s tracking term). The count of samples taken off the pipe is a
 shared integer (`taken`), which the loop's side reads to bound the queue without a message
@@ -48,7 +49,7 @@ def learner_main(
         session.warm_up()
     except Exception as err:  # a bad model or setting: say so, end cleanly
         conn.send(("error", f"learner did not start: {err}"))
-        conn.send(("summary", {}, {}, None))
+        conn.send(("summary", {}, {}, None, None))
         return
     if session.snapshot.version > 0:  # composite starts on its home ground: publish it
         net = session.snapshot.net
@@ -96,7 +97,10 @@ def learner_main(
                 conn.send(("error", f"configure: {err}"))
         elif kind == "close":
             conn.send(
-                ("summary", dict(session.counts), dict(session.reject_reasons), session.last_loss)
-            )
+                (
+                    "summary", dict(session.counts), dict(session.reject_reasons),
+                    session.last_loss, session.held_evidence(),
+                )
+            )  # fmt: skip
             conn.close()
             os._exit(0)  # nothing left to keep: skip tearing torch down (about a second)

@@ -45,6 +45,8 @@ QUEUE_SIZE = 512  # samples: 5 s of slack before dropping
 CHUNK_SAMPLES = 16  # one message per 0.16 s of samples: the pipe, not the loop, carries them
 READY_TIMEOUT_S = 60.0  # the learner process imports torch: about 2 s, far more under load
 Report = Callable[[float, float | None, int], None]  # (sim time, loss, version)
+# the learner's last word: counts, reject reasons, last loss, why updates were held
+Final = tuple[dict[str, int], dict[str, int], float | None, dict[str, float] | None]
 
 
 class OnlineLearner:
@@ -83,7 +85,8 @@ class OnlineLearner:
         context = multiprocessing.get_context("spawn")
         self._sent = 0  # samples down the pipe ...
         self._taken = context.RawValue("q", 0)  # ... and taken off it (the learner counts)
-        self._final: tuple[dict[str, int], dict[str, int], float | None] | None = None
+        # counts, reject reasons, last loss, held evidence: the learner process's last word
+        self._final: Final | None = None
         self._ready = threading.Event()
         self._conn, child = multiprocessing.Pipe(duplex=True)  # a socket pair: 200 kB buffer
         self._process = context.Process(
@@ -180,7 +183,7 @@ class OnlineLearner:
                 if self._final is None:
                     code = self._process.exitcode
                     self.errors.append(f"the learner process ended unexpectedly (exit {code})")
-                    self._final = ({}, {}, None)
+                    self._final = ({}, {}, None, None)
                 self._ready.set()
                 return
             kind = message[0]
@@ -202,7 +205,7 @@ class OnlineLearner:
             elif kind == "ready":
                 self._ready.set()
             elif kind == "summary":
-                self._final = (message[1], message[2], message[3])
+                self._final = (message[1], message[2], message[3], message[4])
                 self._ready.set()
                 return
 
@@ -228,14 +231,14 @@ class OnlineLearner:
 
     # --- the end of the flight -------------------------------------------------------------
 
-    def _counts(self) -> tuple[dict[str, int], dict[str, int], float | None]:
+    def _counts(self) -> Final:
         if self.session is not None:
             s = self.session
-            return dict(s.counts), dict(s.reject_reasons), s.last_loss
-        return self._final if self._final is not None else ({}, {}, None)
+            return dict(s.counts), dict(s.reject_reasons), s.last_loss, s.held_evidence()
+        return self._final if self._final is not None else ({}, {}, None, None)
 
     def summary(self) -> dict[str, Any]:
-        c, reasons, last_loss = self._counts()
+        c, reasons, last_loss, held_evidence = self._counts()
         return {
             "online_method": self.settings.method,
             "online_mode": "deterministic" if self.deterministic else "asynchronous",
@@ -250,6 +253,7 @@ class OnlineLearner:
             "online_outliers": c.get("outliers", 0),
             "online_resets": c.get("resets", 0),
             **self._composite_summary(c),
+            "online_held_evidence": held_evidence,
             "online_loss_first": self.losses[0][1] if self.losses else None,
             "online_loss_last": last_loss,
             "online_errors": self.errors,

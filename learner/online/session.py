@@ -73,6 +73,7 @@ class OnlineSession:
         self.counts = collections.Counter[str]()
         self.reject_reasons = collections.Counter[str]()
         self.last_loss: float | None = None
+        self.held_statistics: list[float] = []  # composite: each held update's likelihood ratio
         self.configure(settings)
 
     def configure(self, settings: OnlineSettings) -> None:
@@ -204,9 +205,22 @@ class OnlineSession:
         self.last_decision = decision.kind
         self.counts[decision.kind] += 1
         if decision.kind == "held":
+            self.held_statistics.append(float(decision.statistic))
             return None
         self.counts["accepted"] += 1
         return self._publish_composite(t_s, self.last_loss)
+
+    def held_evidence(self) -> dict[str, float] | None:
+        """`composite`: why updates published nothing: their likelihood ratios (median and
+        largest) against the threshold a change must pass."""
+        if not self.held_statistics or self._composite is None:
+            return None
+        ratios = np.asarray(self.held_statistics)
+        return {
+            "median": float(np.median(ratios)),
+            "max": float(ratios.max()),
+            "threshold": float(self._composite_config.confidence),
+        }
 
     def _publish_composite(self, t_s: float, loss: float | None) -> Snapshot:
         assert self._composite is not None
