@@ -22,7 +22,6 @@ from autopilot.identity import identity_named
 from simbridge.frames import geodetic_to_local, local_to_geodetic
 from tests.client_vehicle import (
     FLIGHT_WALL_S,
-    IDENTITIES,
     SQUARE_ACCEPTANCE_M,
     SQUARE_SPEED_M_S,
     SQUARE_SPEEDUP,
@@ -133,7 +132,8 @@ def started(identity: str, vehicle: Any, tmp_path: Path, *options: str) -> tuple
     return flight, mavproxy, watcher
 
 
-@pytest.mark.parametrize("identity", IDENTITIES)
+# under ArduCopter, the autopilot MAVProxy is made for; MAVSDK flies it under PX4
+@pytest.mark.parametrize("identity", ["ardupilot"])
 def test_mavproxy_flies_the_8_m_square_at_default_parameters_every_corner(
     vehicle, identity, tmp_path
 ):
