@@ -1,7 +1,7 @@
 """The gap diagnosis end to end on real flights (simulator and autopilot processes): a withheld
 rotor drag is found with its parameters, a null world raises no false alarm, and
 `groundfx gap diagnose` reads another vehicle's CSV through a column mapping and our own rerun
-recordings. The rotor-drag flights are flown once for the module (5 flights: 2 fitting, 1
+recordings, and a bench that stopped resumes with the cases it lacks. The rotor-drag flights are flown once for the module (5 flights: 2 fitting, 1
 held out, its mission replayed in the nominal and the corrected world)."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import pytest
 import yaml
 
 from learner.flightlogs.readers import read_log
-from mission.campaigns.gap_bench import run_case
+from mission.campaigns.gap_bench import RESULTS_FILE, run_bench, run_case
 from mission.campaigns.gap_bench_cases import CASES
 from mission.cli.main import main
 
@@ -49,8 +49,10 @@ def test_withheld_rotor_drag_is_found_within_10_percent(bench_dir: Path, drag: d
 
 
 def test_null_world_raises_no_false_alarm(bench_dir: Path) -> None:
-    result = run_case(CASES["null_hover"], bench_dir, replay=False)
-    assert result["reported"] == []
+    """Through `gap bench`'s runner: the case is a task of a local process pool."""
+    scores = run_bench([CASES["null_hover"]], bench_dir, workers=1)
+    (result,) = scores["cases"]
+    assert result["case"] == "null_hover" and result["reported"] == []
     assert result["false_alarm"] is False
 
 
@@ -152,3 +154,22 @@ def test_torque_residual_vanishes_on_a_clean_flight_with_the_true_world(
     without_ge = {k: v for k, v in true.items() if k != "ground_effect"}
     gap = torque_gap([d], without_ge, true, vehicle)
     assert gap["shrink"] > 0.9
+
+
+def test_a_stopped_bench_resumes_with_the_cases_it_lacks(bench_dir: Path, drag: dict) -> None:
+    """The null case's scores are on file (a bench that stopped after it): a bench of both
+    cases runs only the rotor-drag case, whose flights are cached, and scores it as an
+    uninterrupted run did (the fixture's, with replays, beside the same diagnosis)."""
+    run_bench([CASES["null_hover"]], bench_dir, workers=1)  # on file already: not run again
+    before = (bench_dir / RESULTS_FILE).read_text().splitlines()
+    assert [json.loads(line)["id"] for line in before] == ["null_hover"]
+    scores = run_bench([CASES["null_hover"], CASES["rotor_drag_b"]], bench_dir, workers=2)
+    after = (bench_dir / RESULTS_FILE).read_text().splitlines()
+    assert after[:1] == before and [json.loads(line)["id"] for line in after[1:]] == [
+        "rotor_drag_b"
+    ]
+    null, resumed = scores["cases"]
+    assert null["reported"] == [] and null["false_alarm"] is False
+    for key in ("reported", "exact", "force_shrink"):
+        assert resumed[key] == drag[key], key
+    assert resumed["effects"]["rotor_drag"] == drag["effects"]["rotor_drag"]

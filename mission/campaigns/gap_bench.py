@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from tqdm import tqdm
 
 from mission.campaigns.gap_bench_cases import Case, real_effects
 from mission.campaigns.gap_bench_ooc import summary as ooc_summary
@@ -138,17 +139,44 @@ def _floor(effect: str, truth: dict[str, float]) -> float:
     return max(abs(v) for v in truth.values())
 
 
-def run_bench(cases: list[Case], out: Path, replay: bool = False) -> dict[str, Any]:
-    """Every case; `replay`: with the closed-loop re-flights of the held-out missions (two
-    more flights a case)."""
-    results = []
-    for case in cases:
-        try:
-            results.append(run_case(case, out, replay=replay))
-        except Exception as err:  # a failed case is a figure of the bench, not its end
-            results.append({"case": case.name, "error": f"{type(err).__name__}: {err}"})
-        print(f"gap bench: {case.name}: {_line(results[-1])}", flush=True)
+RESULTS_FILE = "results.jsonl"
+
+
+def run_bench(
+    cases: list[Case],
+    out: Path,
+    replay: bool = False,
+    workers: int | None = None,
+    ray_address: str | None = None,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Every case, each a task of the campaign runner (`workers` local processes, or Ray
+    tasks at `ray_address`); `replay`: with the closed-loop re-flights of the held-out
+    missions (two more flights a case). A case already scored in out/results.jsonl with the
+    same definition and source is not run again; a failed case is a figure of the bench,
+    not its end."""
+    from mission.campaigns.runner import Task, run_tasks, source_fingerprint
+
+    source = source_fingerprint()
+    tasks = [
+        Task(case.name, _key(case, replay, source), run_case, (case, out, replay)) for case in cases
+    ]
+
+    def say(record: dict[str, Any]) -> None:
+        tqdm.write(f"gap bench: {record['id']}: {_line(record)}")
+
+    records = run_tasks(tasks, out / RESULTS_FILE, workers, ray_address, progress, "gap bench", say)
+    results = [{**records[c.name], "case": c.name} for c in cases]
+    for r in results:
+        r.pop("id", None)
+        r.pop("key", None)
     return {"cases": results, "summary": summarise(results, cases)}
+
+
+def _key(case: Case, replay: bool, source: str) -> str:
+    """What decides a case's scores: its definition, the bench's flights and the code."""
+    text = repr((case, replay, AUTOPILOT_PARAMS, BENCH_NOISE, FIT_SEEDS, HOLD_SEEDS, source))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def _line(r: dict[str, Any]) -> str:

@@ -6,17 +6,8 @@ import argparse
 import time
 from pathlib import Path
 
+from mission.cli.options import add_campaign_options, positive_int
 from simbridge.config import ConfigError
-
-
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
-    return value
 
 
 def add_experiment_parser(sub: argparse._SubParsersAction) -> None:
@@ -29,24 +20,14 @@ def add_experiment_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("name", help="all, or an experiment: 4.1 ... 4.7 (or 1 ... 7)")
     p.add_argument(
-        "--trials", type=_positive, help="trials per condition (default: each condition's own)"
+        "--trials", type=positive_int, help="trials per condition (default: each condition's own)"
     )
     p.add_argument("--seed", type=int, default=0, help="first trial seed (default: 0)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument(
-        "--workers", type=_positive, help="local processes, one flight each (default: cores)"
-    )
-    where.add_argument(
-        "--ray",
-        metavar="ADDRESS",
-        help="run the trials as tasks on a Ray cluster (auto, HOST:PORT, ray://HOST:PORT; "
-        "local: start one here); needs the ray extra",
-    )
+    add_campaign_options(p, "trials' flights")
     p.add_argument("--out", type=Path, required=True, help="folder of results and reports")
     p.add_argument(
         "--keep-recordings", action="store_true", help="record every flight to DIR/recordings"
     )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_experiment)
 
 

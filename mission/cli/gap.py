@@ -7,11 +7,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from learner.flightlogs.readers import known_formats
+from mission.cli.options import add_campaign_options
 from simbridge.config import ConfigError
 
 
@@ -75,6 +77,7 @@ def add_parser(sub: Any) -> None:
         help="also fly each held-out mission again in the nominal and corrected worlds",
     )  # fmt: skip
     b.add_argument("--json", action="store_true", help="print the scores as one JSON object")
+    add_campaign_options(b, "cases")
     b.set_defaults(func=cmd_bench)
 
 
@@ -161,7 +164,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if unknown:
         raise ConfigError(f"--cases: unknown case {unknown[0]!r}; known: {', '.join(CASES)}")
     wall0 = time.perf_counter()
-    scores = run_bench([CASES[n] for n in names], args.out, args.replay)
+    scores = run_bench(
+        [CASES[n] for n in names], args.out, args.replay, args.workers, args.ray,
+        progress=not args.no_progress and sys.stderr.isatty(),
+    )  # fmt: skip
     scores["wall_s"] = time.perf_counter() - wall0
     (args.out / "bench.json").write_text(json.dumps(scores, indent=1))
     print(json.dumps(scores) if args.json else table(scores))

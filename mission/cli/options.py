@@ -81,3 +81,28 @@ def sensor_arguments(args: argparse.Namespace) -> tuple[list[str], list[str]]:
     chosen = sensor_sets()[args.sensors]
     params = [a for k, v in chosen.items() for a in ("--param", f"{k}={v}")]
     return sim, params
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return value
+
+
+def add_campaign_options(p: argparse.ArgumentParser, what: str) -> None:
+    """Where a campaign's tasks (`what`: "flights", "cases") run, and its progress bar."""
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers", type=positive_int, help=f"local processes running the {what} (default: cores)"
+    )
+    where.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help=f"run the {what} as tasks on a Ray cluster (auto, HOST:PORT, ray://HOST:PORT; "
+        "local: start one here); needs the ray extra",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")

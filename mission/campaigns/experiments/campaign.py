@@ -1,15 +1,11 @@
-"""A campaign: the trials of the chosen experiments flown by a local process pool or as Ray
-tasks, each result appended to `results.jsonl` as it finishes, so an interrupted campaign
-resumes where it stopped."""
+"""A campaign of experiments: the trials of the chosen experiments, run by the shared campaign
+runner (a local process pool or Ray tasks; `results.jsonl` resumes an interrupted campaign);
+identical seeded flights of different experiments fly once."""
 
 from __future__ import annotations
 
-import json
-import os
 import time
-from collections.abc import Callable, Iterator
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from multiprocessing import get_context
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -17,43 +13,13 @@ from tqdm import tqdm
 
 from mission.campaigns.experiments.definitions import MULTI_NETWORK, MULTI_RHOS, Experiment, Trial
 from mission.campaigns.experiments.runner import fly_trial
-from simbridge.config import ConfigError
+from mission.campaigns.runner import Task, append_result, load_results, run_tasks
 
 RESULTS_FILE = "results.jsonl"
 # The network of experiment 4.2, trained once per campaign: small data, capped epochs.
 MULTI_SAMPLES_PER_RHO = 6000
 MULTI_MAX_EPOCHS = 150
 MULTI_CONTROL_GAIN_BOUND = 1.0
-
-
-def load_results(path: Path) -> dict[str, dict[str, Any]]:
-    """Finished trials by id. A torn last line (the campaign was killed while writing) and
-    failed trials are left out: they are flown again."""
-    results: dict[str, dict[str, Any]] = {}
-    if not path.exists():
-        return results
-    for line in path.read_text().splitlines():
-        try:
-            record = json.loads(line)
-        except json.JSONDecodeError:
-            continue
-        if isinstance(record, dict) and "id" in record and "error" not in record:
-            results[record["id"]] = record
-    return results
-
-
-def append_result(path: Path, record: dict[str, Any]) -> None:
-    """One line per trial, on disk before the next trial is counted; after a torn last line
-    (a campaign killed while writing) on a line of its own."""
-    torn = False
-    if path.exists() and path.stat().st_size > 0:
-        with path.open("rb") as f:
-            f.seek(-1, os.SEEK_END)
-            torn = f.read(1) != b"\n"
-    with path.open("a") as f:
-        f.write(("\n" if torn else "") + json.dumps(record) + "\n")
-        f.flush()
-        os.fsync(f.fileno())
 
 
 def prepare_artefacts(
@@ -96,57 +62,6 @@ def train_multi_network(folder: Path, say: Callable[[str], None] = print) -> Pat
     return model
 
 
-def _pool_results(
-    trials: list[Trial], artefacts: dict[str, str], recordings: Path | None, workers: int
-) -> Iterator[dict[str, Any]]:
-    # spawn: a fresh interpreter per worker, no inherited threads or sockets
-    with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-        pending = {pool.submit(fly_trial, t, artefacts, recordings) for t in trials}
-        try:
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for future in done:
-                    yield future.result()
-        finally:
-            for future in pending:
-                future.cancel()
-
-
-def ray_init(address: str, workers: int | None = None) -> None:
-    """Connect to a Ray cluster (`auto`, `HOST:PORT`, `ray://HOST:PORT`), or `local`: start
-    a Ray instance on this machine."""
-    try:
-        import ray
-    except ImportError:
-        raise ConfigError(
-            "--ray: ray is not installed; install the extra: pip install -c constraints.txt "
-            "-e '.[ray]'"
-        ) from None
-    if ray.is_initialized():
-        return
-    if address == "local":
-        ray.init(num_cpus=workers or os.cpu_count(), include_dashboard=False, log_to_driver=False)
-    else:
-        ray.init(address=address, log_to_driver=False)
-
-
-def _ray_results(
-    trials: list[Trial], artefacts: dict[str, str], recordings: Path | None
-) -> Iterator[dict[str, Any]]:
-    import ray
-
-    task = ray.remote(num_cpus=1)(fly_trial)  # one flight per core, as the pool
-    pending = [task.remote(t, artefacts, recordings) for t in trials]
-    try:
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            for ref in done:
-                yield ray.get(ref)
-    finally:
-        for ref in pending:
-            ray.cancel(ref, force=True)
-
-
 def _shared(record: dict[str, Any], trial: Trial) -> dict[str, Any]:
     """`record`'s flight as the result of `trial` (the same seeded flight, another trial)."""
     return {**record, "id": trial.id, "trial": trial.to_dict(), "same_flight_as": record["id"]}
@@ -179,33 +94,19 @@ def run_trials(
             sharing.setdefault(t.flight_key, []).append(t)
     todo = [group[0] for group in sharing.values()]
     recordings = out / "recordings" if keep_recordings else None
-    workers = workers or os.cpu_count() or 1
-    if ray_address is not None:
-        ray_init(ray_address, workers)
-        stream = _ray_results(todo, artefacts, recordings)
-    else:
-        stream = _pool_results(todo, artefacts, recordings, workers)
-    bar = tqdm(
-        total=len(trials),
-        initial=len(trials) - sum(len(group) for group in sharing.values()),
-        unit="trial",
-        desc="experiment",
-        disable=not progress,
-    )
-    failed = 0
-    try:
-        for record in stream:
-            group = sharing[record["id"].split("/", 2)[2]]
-            for k, trial in enumerate(group):
-                shared = record if k == 0 else _shared(record, trial)
-                append_result(path, shared)
-                if "error" in shared:
-                    failed += 1
-                    tqdm.write(f"trial {shared['id']} failed: {shared['error']}")
-                else:
-                    done[shared["id"]] = shared
-                bar.update(1)
-            bar.set_postfix(failed=failed)
-    finally:
-        bar.close()
+    # a trial's id names its definition: it is its key too
+    tasks = [Task(t.id, t.id, fly_trial, (t, artefacts, recordings)) for t in todo]
+
+    def shared_records(record: dict[str, Any]) -> None:
+        """The flight's record for every trial that shares it (the first is the runner's)."""
+        group = sharing[record["id"].split("/", 2)[2]]
+        for trial in group[1:]:
+            append_result(path, _shared(record, trial))
+        if "error" not in record:
+            for trial in group:
+                done[trial.id] = record if trial is group[0] else _shared(record, trial)
+
+    if progress and len(trials) > len(todo):
+        tqdm.write(f"experiment: {len(trials) - len(todo)} of {len(trials)} trials already flown")
+    run_tasks(tasks, path, workers, ray_address, progress, "experiment", shared_records)
     return done

@@ -1,0 +1,193 @@
+"""The campaign runner every campaign command shares: tasks (a seeded flight, a bench case)
+run by a local process pool (`--workers K`) or as Ray tasks (`--ray ADDRESS`), each result
+appended to the campaign's results file as it finishes, so that a campaign that stopped
+resumes where it stopped, and a progress bar with its ETA.
+
+A task is a top-level function and its arguments, named by an id; its key is what decides its
+result (a changed definition is a new task, flown again). The same task gives the same
+result wherever it runs: the flights are lockstep and seeded. A task whose worker dies (a
+killed process, a lost node) is run again once, elsewhere.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Callable, Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from simbridge.config import ConfigError
+
+
+@dataclass(frozen=True)
+class Task:
+    id: str  # unique within a campaign: the results file's key
+    key: str  # what decides the result: a task whose key changed is run again
+    fn: Callable[..., dict[str, Any]]  # top level (a worker imports it by name)
+    args: tuple[Any, ...] = ()
+
+
+PACKAGES = ("autopilot", "simbridge", "learner", "mission")
+
+
+def source_fingerprint() -> str:
+    """A hash of groundfx's source: part of a task's key where a result depends on the code
+    (a bench rerun after a change runs again; a resumed one does not)."""
+    root = Path(__file__).resolve().parents[2]
+    digest = hashlib.sha256()
+    for package in PACKAGES:
+        for path in sorted((root / package).rglob("*.py")):
+            digest.update(path.relative_to(root).as_posix().encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def load_results(path: Path) -> dict[str, dict[str, Any]]:
+    """Finished tasks by id. A torn last line (the campaign was killed while writing) and
+    failed tasks are left out: they are run again."""
+    results: dict[str, dict[str, Any]] = {}
+    if not path.exists():
+        return results
+    for line in path.read_text().splitlines():
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if isinstance(record, dict) and "id" in record and "error" not in record:
+            results[record["id"]] = record
+    return results
+
+
+def append_result(path: Path, record: dict[str, Any]) -> None:
+    """One line per task, on disk before the next is counted; after a torn last line (a
+    campaign killed while writing) on a line of its own."""
+    torn = False
+    if path.exists() and path.stat().st_size > 0:
+        with path.open("rb") as f:
+            f.seek(-1, os.SEEK_END)
+            torn = f.read(1) != b"\n"
+    with path.open("a") as f:
+        f.write(("\n" if torn else "") + json.dumps(record) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def ray_init(address: str, workers: int | None = None) -> None:
+    """Connect to a Ray cluster (`auto`, `HOST:PORT`, `ray://HOST:PORT`), or `local`: start
+    a Ray instance on this machine."""
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError(
+            "--ray: ray is not installed; install the extra: pip install -c constraints.txt "
+            "-e '.[ray]'"
+        ) from None
+    if ray.is_initialized():
+        return
+    if address == "local":
+        ray.init(num_cpus=workers or os.cpu_count(), include_dashboard=False, log_to_driver=False)
+    else:
+        ray.init(address=address, log_to_driver=False)
+
+
+def _run(task: Task) -> dict[str, Any]:
+    """A task in a worker: its record, or the error that ended it (a figure, not the end of
+    the campaign)."""
+    try:
+        record = task.fn(*task.args)
+    except Exception as err:
+        record = {"error": f"{type(err).__name__}: {err}"}
+    return {**record, "id": task.id, "key": task.key}
+
+
+def _pool(tasks: list[Task], workers: int) -> Iterator[dict[str, Any]]:
+    """Tasks on a local pool; the tasks of a pool whose worker died go to a fresh pool once."""
+    left, retried = {t.id: t for t in tasks}, False
+    while left:
+        # spawn: a fresh interpreter per worker, no inherited threads or sockets
+        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+            pending = {pool.submit(_run, t): t.id for t in left.values()}
+            try:
+                while pending:
+                    done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for future in done:
+                        task_id = pending.pop(future)
+                        record = future.result()
+                        del left[task_id]
+                        yield record
+            except BrokenProcessPool:
+                if retried:
+                    for task_id in left:
+                        yield {"id": task_id, "key": "", "error": "its worker process died twice"}
+                    return
+                retried = True
+            finally:
+                for future in pending:
+                    future.cancel()
+
+
+def _ray(tasks: list[Task]) -> Iterator[dict[str, Any]]:
+    import ray
+
+    # one task per core, as the pool; a task whose worker or node dies is run again once
+    remote = ray.remote(num_cpus=1, max_retries=1)(_run)
+    pending = [remote.remote(t) for t in tasks]
+    try:
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            for ref in done:
+                yield ray.get(ref)
+    finally:
+        for ref in pending:
+            ray.cancel(ref, force=True)
+
+
+def run_tasks(
+    tasks: list[Task],
+    results_path: Path,
+    workers: int | None = None,
+    ray_address: str | None = None,
+    progress: bool = True,
+    desc: str = "campaign",
+    on_record: Callable[[dict[str, Any]], None] | None = None,
+) -> dict[str, dict[str, Any]]:
+    """Run the tasks the results file lacks (or holds under another key); returns every
+    finished task's record by id, failed ones included (`error`). `on_record`: called on
+    each record as it lands, before the bar moves."""
+    results_path.parent.mkdir(parents=True, exist_ok=True)
+    kept = load_results(results_path)
+    # a record without a key is from before keys were written: its id alone decides
+    done = {
+        t.id: kept[t.id] for t in tasks if t.id in kept and kept[t.id].get("key", t.key) == t.key
+    }
+    todo = [t for t in tasks if t.id not in done]
+    workers = workers or os.cpu_count() or 1
+    if ray_address is not None:
+        ray_init(ray_address, workers)
+        stream = _ray(todo)
+    else:
+        stream = _pool(todo, min(workers, max(len(todo), 1)))
+    bar = tqdm(total=len(tasks), initial=len(done), unit="task", desc=desc, disable=not progress)
+    failed = 0
+    try:
+        for record in stream:
+            append_result(results_path, record)
+            if "error" in record:
+                failed += 1
+                tqdm.write(f"{desc}: {record['id']} failed: {record['error']}")
+            if on_record is not None:
+                on_record(record)
+            done[record["id"]] = record
+            bar.update(1)
+            bar.set_postfix(failed=failed)
+    finally:
+        bar.close()
+    return done
