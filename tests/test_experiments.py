@@ -5,20 +5,26 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
+import socket
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 import yaml
 from scipy import stats
 
+from learner.dataset import load_dataset
 from learner.stats import compare, hedges_g, verdict
 from mission.campaigns.experiments import campaign, definitions, report
 from mission.campaigns.experiments.definitions import EXPERIMENTS, Flight, Trial, plan
 from mission.campaigns.experiments.missions import OBSTACLE_TARGETS, make_mission
 from simbridge.world import resolve_world_path
+from tests.helpers import stop_process, wait_for
 
 
 def test_every_experiment_is_defined_with_sound_expectations() -> None:
@@ -189,3 +195,81 @@ def test_ray_tasks_give_the_results_of_the_process_pool(
     assert sorted(results) == sorted(pool_results)
     for trial_id, record in results.items():
         assert _deterministic(record) == _deterministic(pool_results[trial_id])
+
+
+def _free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def ray_cluster(tmp_path: Path) -> Iterator[str]:
+    """A Ray cluster of two nodes on this machine: a head and one worker, one CPU each
+    (`ray start --block`: ending the process ends its node). Token authentication off:
+    both nodes are ours, on loopback."""
+    import ray
+
+    port = _free_tcp_port()
+    address = f"127.0.0.1:{port}"
+    os.environ["RAY_AUTH_MODE"] = "disabled"  # for the nodes and this driver alike
+    head = ["--head", "--port", str(port), "--include-dashboard", "false"]
+    nodes = [_ray_node(head, tmp_path / "head.log")]
+    try:
+        nodes.append(_ray_node(["--address", address], tmp_path / "worker.log"))
+        wait_for(lambda: _connected(ray, address), "the head to take a driver", nodes[0], 120)
+        wait_for(lambda: sum(n["Alive"] for n in ray.nodes()) == 2, "two nodes", nodes[1], 120)
+        yield address
+    finally:
+        ray.shutdown()
+        os.environ.pop("RAY_AUTH_MODE", None)
+        for node in reversed(nodes):
+            stop_process(node, 30.0)
+
+
+def _ray_node(args: list[str], log: Path) -> subprocess.Popen:
+    ray_cli = Path(sys.executable).with_name("ray")
+    common = ["--block", "--node-ip-address", "127.0.0.1", "--num-cpus", "1"]
+    with log.open("w") as out:
+        return subprocess.Popen(
+            [str(ray_cli), "start", *args, *common, "--disable-usage-stats"],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+
+
+def _connected(ray: Any, address: str) -> bool:
+    try:
+        ray.init(address=address, log_to_driver=False)
+    except ConnectionError:
+        return False
+    return True
+
+
+@pytest.mark.xdist_group("test_experiments.py")  # with the other Ray test: one Ray at a time
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="ray is not installed")
+def test_a_two_node_ray_cluster_gives_the_local_results_of_a_bench_and_a_gather(
+    ray_cluster: str, tmp_path: Path
+) -> None:
+    """A small gap bench and a small gather run as tasks on a cluster of two nodes, then
+    here: the same scores, the same samples to the bit."""
+    import shutil
+
+    from mission.campaigns.gap_bench import RESULTS_FILE, run_bench
+    from mission.campaigns.gap_bench_cases import CASES
+    from mission.campaigns.gather import gather_flights
+
+    case = CASES["null_hover"]
+    remote = run_bench([case], tmp_path / "cluster", ray_address=ray_cluster)["cases"][0]
+    gathered = gather_flights(2.0, 300, 3, tmp_path / "cluster.npz", flights=2,
+                              ray_address=ray_cluster, progress=False)  # fmt: skip
+    # here: the bench's flights are the cluster's (cached), its diagnosis runs again
+    shutil.copytree(tmp_path / "cluster", tmp_path / "local")
+    (tmp_path / "local" / RESULTS_FILE).unlink()
+    local = run_bench([case], tmp_path / "local", workers=1)["cases"][0]
+    for key in ("reported", "false_alarm", "force_shrink", "effects"):
+        assert remote[key] == local[key], key
+    here = gather_flights(2.0, 300, 3, tmp_path / "local.npz", flights=2, workers=2,
+                          progress=False)  # fmt: skip
+    a, b = load_dataset(gathered), load_dataset(here)
+    assert len(a) == 300 and all(np.array_equal(a.columns[c], b.columns[c]) for c in a.columns)

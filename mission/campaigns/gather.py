@@ -4,9 +4,12 @@ random waypoints in a simulator process, recording 100 Hz learning samples."""
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import tempfile
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import yaml
 from tqdm import tqdm
 
@@ -15,8 +18,9 @@ from autopilot.flight_config import AutopilotConfig, Flight
 from autopilot.params import MODEL_NAMES, ParamStore
 from autopilot.runner import fly_mission
 from autopilot.simlink import LOST
-from learner.dataset import save_dataset
+from learner.dataset import COLUMNS, load_dataset, save_dataset
 from mission.campaigns.sampling import thesis_waypoints
+from simbridge.config import ConfigError
 from simbridge.effects.ground import GroundEffectParams
 from simbridge.launch import finish, spawn_local_sim
 from simbridge.physics import with_effects
@@ -89,6 +93,57 @@ def gather(
         "expert": f"analytic rho={rho:g}",
     }
     return save_dataset(out, flight.samples, meta)
+
+
+def gather_flight(rho: float, samples: int, seed: int, out: Path, world: str) -> dict[str, Any]:
+    """One flight of a gathering campaign (a task of the campaign runner)."""
+    gather(rho, samples, seed, out, world, progress=False)
+    return {"path": str(out), "samples": samples, "seed": seed}
+
+
+def gather_flights(
+    rho: float,
+    samples: int,
+    seed: int,
+    out: Path,
+    world: str = "default",
+    flights: int = 1,
+    workers: int | None = None,
+    ray_address: str | None = None,
+    progress: bool = True,
+) -> Path:
+    """`samples` over `flights` flights (flight i: seed `seed * 1000 + i`, its share of the
+    samples), run by the campaign runner, each kept in OUT.parts/ as it lands (a rerun flies
+    only the missing ones); then one dataset at `out`, the flights' rows in order. One
+    flight is `gather` itself."""
+    if flights == 1:
+        return gather(rho, samples, seed, out, world, progress)
+    from mission.campaigns.runner import Task, run_tasks, source_fingerprint
+
+    if not 1 <= flights <= samples:
+        raise ConfigError(f"--flights: {flights} must be from 1 to the samples asked ({samples})")
+    parts = out.with_name(out.stem + ".parts")
+    shares = [samples // flights + (i < samples % flights) for i in range(flights)]
+    world_text = resolve_world_path(world).read_text()
+    source = source_fingerprint()
+    tasks = []
+    for i, share in enumerate(shares):
+        flight_seed = seed * 1000 + i
+        key = hashlib.sha256(repr((rho, share, flight_seed, world_text, source)).encode())
+        path = parts / f"flight{i}.npz"
+        tasks.append(Task(f"flight{i}", key.hexdigest()[:16], gather_flight,
+                          (rho, share, flight_seed, path, world)))  # fmt: skip
+    records = run_tasks(
+        tasks, parts / "results.jsonl", workers, ray_address, progress, f"gather rho={rho:g}"
+    )
+    failed = [r for r in records.values() if "error" in r]
+    if failed:
+        raise RuntimeError(f"{len(failed)} of {flights} flights failed: {failed[0]['error']}")
+    data = [load_dataset(Path(records[t.id]["path"])) for t in tasks]
+    rows = np.column_stack([np.concatenate([d.columns[c] for d in data]) for c in COLUMNS])
+    meta = {**data[0].meta, "samples": len(rows), "seed": seed, "flights": flights,
+            "flight_seeds": [t.args[2] for t in tasks]}  # fmt: skip
+    return save_dataset(out, rows, meta)
 
 
 def _fly_expert(world_path: Path, config: AutopilotConfig) -> Flight:

@@ -10,7 +10,7 @@ from typing import Any
 
 from learner.bounds import DEFAULT_CONTROL_GAIN_BOUND, DEFAULT_LAYER_BOUND
 from mission.cli.online import add_online_learn_parsers
-from mission.cli.options import DEFAULT_LOGS
+from mission.cli.options import DEFAULT_LOGS, add_campaign_options, positive_int
 from simbridge.config import ConfigError
 
 
@@ -23,6 +23,12 @@ def add_parser(sub: Any) -> None:
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--world", default="default", help="world whose ground effect rho replaces")
     g.add_argument("--out", type=Path, required=True, help="dataset file (.npz)")
+    g.add_argument(
+        "--flights", type=positive_int, default=1,
+        help="split the samples over N flights (seeds SEED*1000+i), kept in OUT.parts/ as "
+        "they land: a rerun flies only the missing ones (default: 1, one flight)",
+    )  # fmt: skip
+    add_campaign_options(g, "flights")
     g.set_defaults(func=cmd_learn)
     t = learn.add_parser("train", help="offline training")
     t.add_argument("data", type=Path, nargs="+", help="dataset files")
@@ -77,13 +83,18 @@ def add_parser(sub: Any) -> None:
 
 def cmd_learn(args: argparse.Namespace) -> int:
     if args.action == "gather":
-        from mission.campaigns.gather import gather
+        from mission.campaigns.gather import gather_flights
 
         if not 0 < args.rho <= 50:
             raise ConfigError(f"--rho: {args.rho:g} is outside the allowed range (0, 50]")
         if args.samples < 1:
             raise ConfigError(f"--samples: {args.samples} must be at least 1")
-        print(gather(args.rho, args.samples, args.seed, args.out, args.world))
+        print(
+            gather_flights(
+                args.rho, args.samples, args.seed, args.out, args.world, args.flights,
+                args.workers, args.ray, progress=not args.no_progress,
+            )
+        )  # fmt: skip
         return 0
     if args.action == "train":
         from learner.dataset import load_dataset
