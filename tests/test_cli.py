@@ -100,3 +100,11 @@ def test_a_flight_request_crosses_to_the_autopilot_as_its_own_command_line():
     assert FlightRequest().argv() == [] and FlightRequest.parse([]) == FlightRequest()
     more = request.with_options(["--param", "GFX_POS_I=0", "--rho", "1"])
     assert more.param == (*request.param, "GFX_POS_I=0") and more.rho == 1.0
+
+
+def test_bench_campaign_prints_flights_per_minute_for_one_and_two_workers():
+    result = run_groundfx("bench", "campaign", "--flights", "1", "--json")
+    assert result.returncode == 0, result.stderr
+    figures = json.loads(result.stdout.strip().splitlines()[-1])
+    assert figures["flights_per_min_1"] > 0 and figures["flights_per_min_2"] > 0
+    assert figures["speedup"] == figures["flights_per_min_2"] / figures["flights_per_min_1"]

@@ -1,4 +1,4 @@
-"""`groundfx bench sim|model|online|sitl|soak`: benchmarks that print figures."""
+"""`groundfx bench sim|model|online|sitl|soak|campaign`: benchmarks that print figures."""
 
 from __future__ import annotations
 
@@ -41,6 +41,15 @@ def add_parser(sub: Any) -> None:
     b.add_argument("--world", default="default")
     b.add_argument(
         "--repeat", type=int, default=5, help="flights with recording off and on each (default: 5)"
+    )
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(func=cmd_bench)
+    b = bench_sub.add_parser(
+        "campaign", help="the campaign runner's throughput with 1 and K local workers"
+    )
+    b.add_argument("--flights", type=int, default=8, help="short flights per setting (default: 8)")
+    b.add_argument(
+        "--workers", type=int, default=2, help="the second setting's workers (default: 2)"
     )
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench)
@@ -100,6 +109,16 @@ def _soak(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     if args.target == "soak":
         return _soak(args)
+    if args.target == "campaign":
+        from mission.campaigns.campaign_bench import bench_campaign
+
+        if args.flights < 1 or args.workers < 2:
+            raise ConfigError("--flights must be at least 1 and --workers at least 2")
+        result = bench_campaign(args.flights, args.workers)
+        print(
+            json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
+        )
+        return 0
     if args.target == "model":
         from learner.bench import bench_model
 
