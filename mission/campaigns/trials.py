@@ -54,18 +54,51 @@ def fly_landing_trials(
     return results
 
 
-def evaluate_models(
-    seeds: list[int], world: str, network: str | Path | None, say=print
+def landing_trial_flight(
+    seed: int, model: str, world: str, network: str | Path | None
 ) -> dict[str, Any]:
-    """Hold z error of `none`, `analytic` and `neural` over seeded landing trials."""
+    """One seeded landing trial of `model` (a task of the campaign runner): its summary."""
+    (summary,) = fly_landing_trials([seed], model, world, network)
+    return summary
+
+
+def evaluate_models(
+    seeds: list[int],
+    world: str,
+    network: str | Path | None,
+    say=print,
+    workers: int | None = 1,
+    ray_address: str | None = None,
+    out: Path | None = None,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Hold z error of `none`, `analytic` and `neural` over seeded landing trials, flown by
+    the campaign runner (`workers` local processes, or Ray tasks at `ray_address`); with
+    `out`, each trial lands in out/results.jsonl and a rerun flies only the missing ones."""
+    import hashlib
+
     import numpy as np
 
     from learner.stats import gap_closed, mean_ci95, welch
+    from mission.campaigns.runner import Task, run_tasks, source_fingerprint
 
+    source = source_fingerprint()
+    tasks = []
+    for model in ("none", "analytic", "neural"):
+        net = str(network) if model == "neural" and network is not None else None
+        for seed in seeds:
+            key = hashlib.sha256(repr((model, seed, world, net, source)).encode()).hexdigest()
+            tasks.append(Task(f"{model}/{seed}", key[:16], landing_trial_flight,
+                              (seed, model, world, net)))  # fmt: skip
+    with tempfile.TemporaryDirectory(prefix="groundfx-evaluate-") as tmp:
+        results_path = (out or Path(tmp)) / "results.jsonl"
+        records = run_tasks(tasks, results_path, workers, ray_address, progress, "evaluate")
+    failed = [r for r in records.values() if "error" in r]
+    if failed:
+        raise RuntimeError(f"{len(failed)} trials failed: {failed[0]['id']}: {failed[0]['error']}")
     errors = {}
     for model in ("none", "analytic", "neural"):
-        runs = fly_landing_trials(seeds, model, world, network if model == "neural" else None)
-        errors[model] = np.array([r["hold_z_rms_error_m"] for r in runs])
+        errors[model] = np.array([records[f"{model}/{s}"]["hold_z_rms_error_m"] for s in seeds])
         mean, lo, hi = mean_ci95(errors[model])
         say(
             f"{model:9s} hold z RMS error {mean * 1000:7.2f} mm  (95% CI {lo * 1000:.2f} to "

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -72,6 +73,11 @@ def add_parser(sub: Any) -> None:
     e.add_argument("--trials", type=int, default=10)
     e.add_argument("--seed", type=int, default=0, help="first trial seed")
     e.add_argument("--json", action="store_true")
+    e.add_argument(
+        "--out", type=Path,
+        help="keep each trial in OUT/results.jsonl as it lands: a rerun flies only the rest",
+    )  # fmt: skip
+    add_campaign_options(e, "trials")
     e.set_defaults(func=cmd_learn)
     add_online_learn_parsers(learn, cmd_learn)
     pl = learn.add_parser("plot", help="true against predicted f_ge,z over altitude")
@@ -129,8 +135,10 @@ def cmd_learn(args: argparse.Namespace) -> int:
         from mission.campaigns.trials import evaluate_models
 
         result = evaluate_models(
-            list(range(args.seed, args.seed + args.trials)), args.world, args.network
-        )
+            list(range(args.seed, args.seed + args.trials)), args.world, args.network,
+            workers=args.workers, ray_address=args.ray, out=args.out,
+            progress=not args.no_progress and sys.stderr.isatty(),
+        )  # fmt: skip
         if args.json:
             print(json.dumps(result))
         return 0
