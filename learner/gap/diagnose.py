@@ -13,6 +13,7 @@ import numpy as np
 from learner.flightlogs.flightlog import FlightLog
 from learner.gap import fit as gapfit
 from learner.gap.candidates import CANDIDATES, Values, nominal_values
+from learner.gap.corrected import corrected_members, is_sensor
 from learner.gap.flightdata import FlightData, describe_left_out, prepare
 from learner.gap.ground_level import level_logs
 from learner.gap.plausibility import check as check_plausible
@@ -59,6 +60,8 @@ class Diagnosis:
     unexplained: dict[str, Any] = field(default_factory=dict)  # what the catalogue leaves
     learned_model: ResidualModel | None = None  # that, learnt (a `learned_residual` effect)
     z_offsets_m: dict[str, float] = field(default_factory=dict)  # log -> z shifted by (m)
+    # what the corrected world gains (`corrected.corrected_members`): written, kept out, why
+    corrected: dict[str, Any] = field(default_factory=dict)
 
 
 # Enough flight before any fit: the intervals rest on blocks of 1 s (and 5 s) of flight
@@ -200,7 +203,7 @@ def diagnose(
     else:
         gap = cross_validated_gap(problem, best.names, folds)
     on_stage(STAGES[3])
-    left = learn_unexplained(problem, best.values)
+    left = learn_unexplained(problem, best.values, hold_problem)
     corrected = [
         r - p
         for r, p in zip(
@@ -215,6 +218,7 @@ def diagnose(
         gap["force_rms_n_learned"] = held_out_learned(hold_problem, best.values, left.model)
     mark_confidence(effects, unexplained)
     per_flight_values(effects, all_data, nominal, vehicle, best)
+    members = corrected_members(effects, best.values, vehicle)
 
     return Diagnosis(
         fitting=[d.name for d in fit_data],
@@ -238,6 +242,7 @@ def diagnose(
         unexplained=unexplained,
         learned_model=left.model,
         z_offsets_m=z_offsets,
+        corrected=members,
     )
 
 
@@ -293,8 +298,10 @@ def where(table: list[RegimeBin], limit: int = 8) -> list[dict[str, Any]]:
 
 
 def held_out_gap(problem: gapfit.Problem, values: Values) -> dict[str, Any]:
-    """Force gap and rollout error before and after the correction, overall and per region."""
-    corrected = {**problem.nominal, **values}
+    """Force gap and rollout error before and after the correction, overall and per region.
+    The force gap is the logs' (a sensor effect corrects what they measure); the rollouts
+    and the torque fly the corrected world's forces, which hold no sensor effect."""
+    corrected = {**problem.nominal, **{k: v for k, v in values.items() if not is_sensor(k)}}
     after = [r - p for r, p in zip(problem.residuals, problem.predicted(values), strict=True)]
     out: dict[str, Any] = {"flights": [d.name for d in problem.flights]}
     before_f = _pooled_gap(problem.flights, problem.residuals, problem.noise_var)

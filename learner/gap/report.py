@@ -10,17 +10,19 @@ from typing import Any
 import numpy as np
 import yaml
 
-from learner.gap.candidates import to_world_effects
+from learner.gap.corrected import world_column, world_entries
 from learner.gap.diagnose import Diagnosis
+from learner.gap.numbers import NO_GAP, fig, json_safe, pct
 from learner.gap.regimes import describe_range
-from learner.gap.report_unexplained import markdown_section, write_learned
+from learner.gap.report_unexplained import WORLD_FILE, markdown_section, write_learned
 from learner.gap.summaries import markdown_section as summaries_section
 
 
 def corrected_world_yaml(nominal_yaml: str, diagnosis: Diagnosis) -> str:
-    """The nominal world with the chosen effects (fitted parameters) added or replaced."""
+    """The nominal world with the effects the diagnosis writes (`corrected.corrected_members`:
+    those named present, a group through one member, no sensor effect) added or replaced."""
     data = yaml.safe_load(nominal_yaml)
-    chosen = to_world_effects(diagnosis.chosen, diagnosis.vehicle)
+    chosen = world_entries(diagnosis.corrected)
     names = {e["name"] for e in chosen}
     kept = [e for e in data.get("effects") or [] if e.get("name") not in names]
     data["effects"] = kept + chosen
@@ -29,26 +31,57 @@ def corrected_world_yaml(nominal_yaml: str, diagnosis: Diagnosis) -> str:
 
 
 def figures(diagnosis: Diagnosis, closed_loop: dict[str, Any] | None) -> dict[str, Any]:
+    """Every figure of the run as plain data (a figure that could not be measured: None)."""
+    return json_safe(
+        {
+            "vehicle": diagnosis.vehicle.name if diagnosis.vehicle else None,
+            "left_out": diagnosis.left_out,
+            "z_offsets_m": diagnosis.z_offsets_m,
+            "notes": all_notes(diagnosis, closed_loop),
+            "fitting_flights": diagnosis.fitting,
+            "held_out_flights": diagnosis.held_out,
+            "noise_sd_n": diagnosis.noise_sd_n,
+            "ess_ratio": diagnosis.ess_ratio,
+            "excitation_z": diagnosis.excitation,
+            "effects": diagnosis.effects,
+            "chosen": {k: [float(x) for x in v] for k, v in diagnosis.chosen.items()},
+            "corrected_world": corrected_world_figures(diagnosis),
+            "search": diagnosis.search,
+            "regimes": [dict(b.__dict__, significant=b.significant) for b in diagnosis.regimes],
+            "rules": diagnosis.rules,
+            "gap": diagnosis.gap,
+            "unexplained": diagnosis.unexplained,
+            "closed_loop": closed_loop,
+            "summaries": diagnosis.summaries,
+        }
+    )
+
+
+def corrected_world_figures(diagnosis: Diagnosis) -> dict[str, Any]:
+    """Exactly what corrected_world.yaml gains (`effects`: its entries), each chosen
+    candidate's fate with why, and whether the learnt world is offered."""
+    members = diagnosis.corrected
     return {
-        "vehicle": diagnosis.vehicle.name if diagnosis.vehicle else None,
-        "left_out": diagnosis.left_out,
-        "z_offsets_m": diagnosis.z_offsets_m,
-        "notes": all_notes(diagnosis, closed_loop),
-        "fitting_flights": diagnosis.fitting,
-        "held_out_flights": diagnosis.held_out,
-        "noise_sd_n": diagnosis.noise_sd_n,
-        "ess_ratio": diagnosis.ess_ratio,
-        "excitation_z": diagnosis.excitation,
-        "effects": diagnosis.effects,
-        "chosen": {k: [float(x) for x in v] for k, v in diagnosis.chosen.items()},
-        "search": diagnosis.search,
-        "regimes": [dict(b.__dict__, significant=b.significant) for b in diagnosis.regimes],
-        "rules": diagnosis.rules,
-        "gap": diagnosis.gap,
-        "unexplained": diagnosis.unexplained,
-        "closed_loop": closed_loop,
-        "summaries": diagnosis.summaries,
+        "effects": world_entries(members),
+        "written": [{k: v for k, v in m.items() if k != "entries"} for m in members["written"]],
+        "kept_out": members["kept_out"],
+        "learned_world": diagnosis.unexplained.get("learned_world"),
     }
+
+
+def corrected_world_lines(diagnosis: Diagnosis) -> list[str]:
+    """The corrected world in sentences: what went in and why, what was kept out and why."""
+    members = diagnosis.corrected
+    lines = [f"- written: {m['why']}" for m in members["written"]]
+    lines += [f"- kept out: {m['why']}" for m in members["kept_out"]]
+    if not lines:
+        lines = ["- nothing added: no effect was named present"]
+    learned = diagnosis.unexplained.get("learned_world")
+    if learned:
+        state = "offered" if learned["offered"] else "not written"
+        lines.append(f"- the world with the learnt residual ({WORLD_FILE}): {state}: "
+                     f"{learned['why']}")  # fmt: skip
+    return lines
 
 
 def closed_loop_sentence(closed_loop: dict[str, Any] | None) -> str | None:
@@ -62,10 +95,12 @@ def closed_loop_sentence(closed_loop: dict[str, Any] | None) -> str | None:
     failures = "; ".join(f"{f['flight']} in the {f['world']} world: {f['reason']}" for f in failed)
     if status == "failed":
         return f"closed-loop replay failed, no figure: {failures}"
+    why = "the replays share no time with the logged flights"
     text = (
         f"closed-loop tracking difference to the logged flights: "
-        f"{closed_loop['before_m'] * 1000:.1f} mm -> {closed_loop['after_m'] * 1000:.1f} mm, "
-        f"shrink {closed_loop['shrink'] * 100:.0f}% ({closed_loop['flights']} flights)"
+        f"{fig(closed_loop['before_m'], '.1f', 1000, 'mm', why)} -> "
+        f"{fig(closed_loop['after_m'], '.1f', 1000, 'mm', why)}, "
+        f"shrink {pct(closed_loop['shrink'], why)} ({closed_loop['flights']} flights)"
     )
     return text + (f"; not flown: {failures}" if failures else "")
 
@@ -102,7 +137,7 @@ def write_outputs(
     paths["world"].write_text(corrected)
     paths.update(write_learned(diagnosis, corrected, out))
     data = figures(diagnosis, closed_loop)
-    paths["json"].write_text(json.dumps(data, indent=1, default=_plain))
+    paths["json"].write_text(json.dumps(data, indent=1, default=_plain, allow_nan=False))
     paths.update(_plots(diagnosis, out))
     if recording:
         paths["recording"] = _recording(diagnosis, out / "residuals.rrd")
@@ -188,6 +223,24 @@ def _recording(diagnosis: Diagnosis, path: Path) -> Path:
     return path
 
 
+def _parameter(name: str, v: dict[str, Any]) -> str:
+    """'rho 3.01 (2.95 to 3.07) 1', or the value without an interval, and why."""
+    value = fig(v["value"], ".4g", why="the fit gave none")
+    if not v.get("ci95"):
+        return f"{name} {value} {v['unit']} (refused: no interval)"
+    lo, hi = (fig(x, ".4g", why="its standard error could not be computed") for x in v["ci95"])
+    return f"{name} {value} ({lo} to {hi}) {v['unit']}"
+
+
+def _change(g: dict[str, Any], scale: float, unit: str, spec: str = ".2f", why: str = "") -> str:
+    """'14.20 mN -> 0.69 mN, shrink 95%', a figure that could not be measured as n/a and why."""
+    return (
+        f"{fig(g.get('before'), spec, scale, unit, why)} -> "
+        f"{fig(g.get('after'), spec, scale, unit, why)}, "
+        f"shrink {pct(g.get('shrink'), why or NO_GAP)}"
+    )
+
+
 def _scored_on(gap: dict[str, Any]) -> str:
     if gap.get("in_sample"):
         return "in-sample: one fitting flight, none held out"
@@ -207,8 +260,8 @@ def _markdown(
         "",
         f"Nominal world `{world}`; fitting flights {', '.join(diagnosis.fitting)}; "
         f"held out {', '.join(diagnosis.held_out) or 'none (cross-validated)'}. Residual "
-        f"noise {diagnosis.noise_sd_n * 1000:.2f} mN per component; effective samples "
-        f"{diagnosis.ess_ratio:.2f} per sample. Vehicle "
+        f"noise {fig(diagnosis.noise_sd_n, '.2f', 1000, 'mN')} per component; effective "
+        f"samples {fig(diagnosis.ess_ratio, '.2f')} per sample. Vehicle "
         f"`{diagnosis.vehicle.name if diagnosis.vehicle else '?'}`; "
         f"{diagnosis.left_out.get('summary', 'left out: nothing')}.",
         "",
@@ -228,49 +281,39 @@ def _markdown(
         "",
         "## Which",
         "",
-        "| effect | status | parameters (95% CI) | note |",
-        "|---|---|---|---|",
+        "| effect | status | parameters (95% CI) | corrected world | note |",
+        "|---|---|---|---|---|",
     ]
+    column = world_column(diagnosis.effects, diagnosis.corrected)
     for effect, e in diagnosis.effects.items():
-        params = "; ".join(
-            f"{p} {v['value']:.4g} ({v['ci95'][0]:.4g} to {v['ci95'][1]:.4g}) {v['unit']}"
-            if v.get("ci95")
-            else f"{p} {v['value']:.4g} {v['unit']} (refused: no interval)"
-            for p, v in (e.get("parameters") or {}).items()
-        )
+        params = "; ".join(_parameter(p, v) for p, v in (e.get("parameters") or {}).items())
         note = e.get("why", "")
         if e["status"] == "present" and not e.get("confident", True):
             note = f"not named with confidence: {e.get('confidence_note', '')}"
-        lines.append(f"| {effect} | {e['status']} | {params} | {note} |")
+        lines.append(f"| {effect} | {e['status']} | {params} | {column.get(effect, '')} | {note} |")
+    lines += ["", "## The corrected world", "", *corrected_world_lines(diagnosis)]
     g = diagnosis.gap
     lines += ["", "## How far", ""]
-    f = g["force_rms_n"]
-    lines.append(
-        f"- force gap (systematic RMS, noise removed; {_scored_on(g)}): "
-        f"{f['before'] * 1000:.2f} mN -> {f['after'] * 1000:.2f} mN, "
-        f"shrink {f['shrink'] * 100:.0f}%"
-    )
+    lines.append(f"- force gap (systematic RMS, noise removed; {_scored_on(g)}): "
+                 + _change(g["force_rms_n"], 1000, "mN"))  # fmt: skip
     if "force_rms_n_measured_floor" in g:
         m = g["force_rms_n_measured_floor"]
         lines.append(
             f"- the same against the noise floor measured at 0.1 s (Allan variance of the "
-            f"corrected residual: {m['floor'] * 1000:.2f} mN, white noise would leave "
-            f"{m['white_floor'] * 1000:.2f}): {m['before'] * 1000:.2f} mN -> "
-            f"{m['after'] * 1000:.2f} mN, shrink {m['shrink'] * 100:.0f}%"
+            f"corrected residual: {fig(m['floor'], '.2f', 1000, 'mN')}, white noise would "
+            f"leave {fig(m['white_floor'], '.2f', 1000)}): " + _change(m, 1000, "mN")
         )
     if "torque_rms_n_m" in g:
-        q = g["torque_rms_n_m"]
         lines.append(
-            f"- torque gap (body frame, RMS of 0.1 s means; holds the rate noise's floor): "
-            f"{q['before'] * 1e6:.2f} uN m -> {q['after'] * 1e6:.2f} uN m, "
-            f"shrink {q['shrink'] * 100:.0f}%"
+            "- torque gap (body frame, RMS of 0.1 s means; holds the rate noise's floor): "
+            + _change(g["torque_rms_n_m"], 1e6, "uN m")
         )
     if "rollout_rms_m" in g:
         r = g["rollout_rms_m"]
         lines.append(
-            f"- open-loop rollout error at {r['horizon_s']:g} s: {r['before'] * 1000:.1f} mm -> "
-            f"{r['after'] * 1000:.1f} mm, shrink {r['shrink'] * 100:.0f}% (includes the noise "
-            "of the logged start states)"
+            f"- open-loop rollout error at {r['horizon_s']:g} s: "
+            + _change(r, 1000, "mm", ".1f", "no rollout fits in the flights' stretches")
+            + " (includes the noise of the logged start states)"
         )
     sentence = closed_loop_sentence(closed_loop)
     if sentence:
@@ -287,8 +330,8 @@ def _markdown(
                 continue
             lines.append(
                 f"| {describe_range(r['variable'], r['low'], r['high'])} | {r['samples']} | "
-                f"{r['before_n'] * 1000:.2f} | {r['after_n'] * 1000:.2f} | "
-                f"{r['shrink'] * 100:.0f}% |"
+                f"{fig(r['before_n'], '.2f', 1000)} | {fig(r['after_n'], '.2f', 1000)} | "
+                f"{pct(r['shrink'])} |"
             )
     lines += markdown_section(diagnosis)
     lines += ["", "![residuals](residuals.png)", "", "Outputs: " + ", ".join(

@@ -11,16 +11,23 @@ import numpy as np
 import yaml
 
 from learner.gap.diagnose import Diagnosis
+from learner.gap.numbers import fig, pct
 from learner.gap.regimes import describe_range
 from simbridge.effects.learned import save_residual_model
 
 MODEL_FILE = "learned_residual.npz"
 WORLD_FILE = "corrected_world_learned.yaml"
+PLOT_FILE = "unexplained.png"
 
 
 def write_learned(diagnosis: Diagnosis, corrected_yaml: str, out: Path) -> dict[str, Path]:
-    """The model, the corrected world with it and the shape plot; nothing without a model."""
-    if diagnosis.learned_model is None:
+    """The model, the corrected world with it and the shape plot, where the learnt world is
+    offered (it shrinks what the catalogue leaves on flights it was not trained on:
+    learner/gap/structure.py); nothing otherwise, and no stale files of an earlier run."""
+    offered = (diagnosis.unexplained.get("learned_world") or {}).get("offered", False)
+    if diagnosis.learned_model is None or not offered:
+        for name in (MODEL_FILE, WORLD_FILE, PLOT_FILE):
+            (out / name).unlink(missing_ok=True)
         return {}
     meta = {"share": diagnosis.unexplained.get("share")}
     paths = {"learned_model": save_residual_model(out / MODEL_FILE, diagnosis.learned_model, meta)}
@@ -35,7 +42,7 @@ def write_learned(diagnosis: Diagnosis, corrected_yaml: str, out: Path) -> dict[
     paths["world_learned"].write_text(header + yaml.safe_dump(data, sort_keys=False))
     shape = diagnosis.unexplained.get("shape")
     if shape:
-        paths["plot_unexplained"] = _plot(shape, out / "unexplained.png")
+        paths["plot_unexplained"] = _plot(shape, out / PLOT_FILE)
     return paths
 
 
@@ -84,15 +91,19 @@ def markdown_section(diagnosis: Diagnosis) -> list[str]:
                 f"{w['mean_share'] * 100:+.1f}% of the weight"
             )
     learned = diagnosis.gap.get("force_rms_n_learned")
+    offer = u.get("learned_world") or {}
     if learned:
         lines += [
             "",
-            f"Held out: force gap {learned['before'] * 1000:.2f} mN -> "
-            f"{learned['after_catalogue'] * 1000:.2f} mN with the catalogue (shrink "
-            f"{learned['shrink_catalogue'] * 100:.0f}%) -> {learned['after'] * 1000:.2f} mN "
-            f"with the learnt residual too (shrink {learned['shrink'] * 100:.0f}%); "
-            f"`{WORLD_FILE}` carries it as a `learned_residual` effect.",
+            f"Held out: force gap {fig(learned['before'], '.2f', 1000, 'mN')} -> "
+            f"{fig(learned['after_catalogue'], '.2f', 1000, 'mN')} with the catalogue (shrink "
+            f"{pct(learned['shrink_catalogue'])}) -> {fig(learned['after'], '.2f', 1000, 'mN')} "
+            f"with the learnt residual too (shrink {pct(learned['shrink'])}).",
         ]
-    if u.get("shape"):
-        lines += ["", "![unexplained](unexplained.png)"]
+    if offer.get("offered"):
+        lines += ["", f"`{WORLD_FILE}` carries it as a `learned_residual` effect: {offer['why']}."]
+        if u.get("shape"):
+            lines += ["", f"![unexplained]({PLOT_FILE})"]
+    elif offer:
+        lines += ["", f"`{WORLD_FILE}` is not written: {offer['why']}."]
     return lines

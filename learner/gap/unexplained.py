@@ -2,9 +2,11 @@
 small Lipschitz-bounded network on regime features both a log and the simulator have
 (simbridge/effects/learned.py), with
 
-- a test of whether anything systematic is left: the network is trained on some fitting
-  flights and scored on the others (on alternate 5 s blocks with one fitting flight); what it
-  removes there is structure, not noise;
+- a test of whether anything systematic is left: the network trained on the fitting flights
+  and scored on the held-out ones (without them: trained on some fitting flights and scored
+  on the others, on alternate 5 s blocks with one fitting flight); what it removes there,
+  by a clear margin, is structure outside the catalogue (learner/gap/structure.py), and the
+  inputs that carry it are named;
 - the unexplained share of the gap: the systematic force gap after the catalogue over the
   gap before it;
 - its shape: partial dependence of the learnt force on height, time since take-off, speed
@@ -18,24 +20,27 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import torch
 
 from learner.gap.candidates import Values
 from learner.gap.fit import Problem
 from learner.gap.flightdata import FlightData
 from learner.gap.residual import SMOOTH_WINDOW_S, force_gap_ms, smooth_per_segment
+from learner.gap.residual_net import train_model
 from learner.gap.rollout import shrink
 from learner.gap.rotor_forces import rotor_forces_n
-from learner.network import Adam, linear_layers, project_lipschitz
+from learner.gap.structure import (
+    SHARE_MIN,
+    STRUCTURE_GAIN,
+    carried_by,
+    has_structure,
+    input_losses,
+    noise_margin_n2,
+    removed_n2,
+    sentence,
+)
 from simbridge.effects.learned import FEATURES, ResidualModel, residual_features
 from simbridge.vehicle import Vehicle
 
-HIDDEN = (32, 32)
-LAYER_BOUND = 3.0  # per-layer spectral norm in standardised units: a smooth force field
-EPOCHS = 400
-MAX_ROWS = 8_000  # rows a training run uses (evenly spaced): enough for 15 inputs
-LEARNABLE_MIN = 0.25  # the network removes at least this share of the unseen flights' gap
-SHARE_MIN = 0.10  # and the catalogue leaves at least this share of the gap
 BLOCK_S = 5.0  # alternate blocks as folds when there is one fitting flight
 PDP_POINTS = 25
 
@@ -50,53 +55,6 @@ def features(d: FlightData, values: Values, vehicle: Vehicle) -> np.ndarray:
         d.time_s - d.time_s[0],
         vehicle.rotor_radius_m,
         vehicle.weight_n,
-    )
-
-
-def train_model(x: np.ndarray, y: np.ndarray, seed: int = 0) -> ResidualModel:
-    """A ReLU network x -> y (N) with spectral-norm bounded layers, full-batch Adam."""
-    if len(x) > MAX_ROWS:
-        keep = np.linspace(0, len(x) - 1, MAX_ROWS).astype(int)
-        x, y = x[keep], y[keep]
-    mean = x.mean(axis=0)
-    std = np.maximum(x.std(axis=0), 1e-6)
-    scale = float(max(np.sqrt(np.mean(y**2)), 1e-9))
-    torch.manual_seed(seed)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # a tiny network: threads only contend (25 ms a step on 2 cores)
-    try:
-        return _train(x, y, mean, std, scale)
-    finally:
-        torch.set_num_threads(threads)
-
-
-def _train(
-    x: np.ndarray, y: np.ndarray, mean: np.ndarray, std: np.ndarray, scale: float
-) -> ResidualModel:
-    sizes = (x.shape[1], *HIDDEN, 3)
-    layers: list[torch.nn.Module] = []
-    for i in range(len(sizes) - 1):
-        layers.append(torch.nn.Linear(sizes[i], sizes[i + 1]))
-        if i < len(sizes) - 2:
-            layers.append(torch.nn.ReLU())
-    net = torch.nn.Sequential(*layers)
-    xt = torch.tensor((x - mean) / std, dtype=torch.float32)
-    yt = torch.tensor(y / scale, dtype=torch.float32)
-    opt = Adam(net.parameters(), lr=3e-3, weight_decay=1e-4)
-    for _ in range(EPOCHS):
-        opt.zero_grad()
-        loss = torch.mean((net(xt) - yt) ** 2)
-        loss.backward()
-        opt.step()
-        project_lipschitz(net, LAYER_BOUND)
-    lin = linear_layers(net)
-    return ResidualModel(
-        tuple(layer.weight.detach().double().numpy().copy() for layer in lin),
-        tuple(layer.bias.detach().double().numpy().copy() for layer in lin),
-        mean,
-        std,
-        scale,
-        FEATURES,
     )
 
 
@@ -142,41 +100,111 @@ def _folds(problem: Problem) -> list[tuple[list[np.ndarray], list[np.ndarray]]]:
     return out
 
 
-def learn_unexplained(problem: Problem, values: Values) -> Unexplained:
-    """The residual `values` leave on the fitting flights: is it systematic (learnable on
-    flights not trained on), how large, and the model trained on all of it."""
+# the rows of one flight a network was not trained on: (flight, left, with the network)
+Part = tuple[FlightData, np.ndarray, np.ndarray]
+
+
+def learn_unexplained(problem: Problem, values: Values, hold: Problem | None = None) -> Unexplained:
+    """The residual `values` leave on the fitting flights: how large, whether it has structure
+    outside the catalogue (learnt on the fitting flights, it shrinks on the `hold` flights;
+    without them, on fitting flights left out in turn) and what carries it, and the model
+    trained on all of it, with whether a world carrying it is offered."""
     xs, ys = _targets(problem, values)
     after = [r - p for r, p in zip(problem.residuals, problem.predicted(values), strict=True)]
     before_gap = _gap(problem.flights, problem.residuals, problem.noise_var)
     after_gap = _gap(problem.flights, after, problem.noise_var)
-    cv_before, cv_after = 0.0, 0.0
+    cv_parts: list[Part] = []
     for train, test in _folds(problem):
         x = np.concatenate([a[m] for a, m in zip(xs, train, strict=True)])
         y = np.concatenate([a[m] for a, m in zip(ys, train, strict=True)])
         model = train_model(x, y)
         for d, a, xf, m in zip(problem.flights, after, xs, test, strict=True):
-            if not m.any():
-                continue
-            part = _masked(d, m)
-            left = a[m]
-            learnt = left - model.force_n(xf[m])
-            cv_before += force_gap_ms(left, part.segment, d.dt_s, problem.noise_var) * m.sum()
-            cv_after += force_gap_ms(learnt, part.segment, d.dt_s, problem.noise_var) * m.sum()
-    learnable = shrink(np.sqrt(cv_before), np.sqrt(cv_after)) if cv_before > 0 else 0.0
+            if m.any():
+                cv_parts.append((_masked(d, m), a[m], a[m] - model.force_n(xf[m])))
+    learnable = _parts_gain(cv_parts, problem.noise_var)
     share = after_gap / before_gap if before_gap > 0 else 0.0
-    significant = bool(learnable >= LEARNABLE_MIN and share >= SHARE_MIN)
-    model = train_model(np.concatenate(xs), np.concatenate(ys))
+    x_all, y_all = np.concatenate(xs), np.concatenate(ys)
+    model = train_model(x_all, y_all)
+    held = hold is not None and bool(hold.flights)
+    if hold is not None and held:
+        parts, x_test, y_test = _held_out_parts(hold, values, model)
+        gain, where = _parts_gain(parts, hold.noise_var), "the held-out flights"
+        margin = noise_margin_n2(parts, hold.noise_var)
+    else:
+        first = _folds(problem)[0][1]
+        x_test = np.concatenate([a[m] for a, m in zip(xs, first, strict=True)])
+        y_test = np.concatenate([a[m] for a, m in zip(ys, first, strict=True)])
+        x_all = np.concatenate([a[~m] for a, m in zip(xs, first, strict=True)])
+        y_all = np.concatenate([a[~m] for a, m in zip(ys, first, strict=True)])
+        gain, parts, where = learnable, cv_parts, "fitting flights it was not trained on"
+        margin = noise_margin_n2(parts, problem.noise_var)
+    removed = removed_n2(parts)
+    structure = has_structure(gain, removed, margin)
+    carriers = input_losses(x_all, y_all, x_test, y_test) if structure else None
+    inputs = (carriers or {}).get("inputs", [])
     summary: dict[str, Any] = {
         "share": float(share),
         "gap_before_n": before_gap,
         "gap_after_catalogue_n": after_gap,
-        "learnable_share": float(learnable),
-        "significant": significant,
-        "explained": not significant,
-        "sentence": sentence(share, learnable, significant),
+        "learnable_share": learnable,
+        "scored_on": "held_out" if held else "cross_validated",
+        "learnt_gain": gain,
+        "learnt_removed_n2": removed,
+        "noise_margin_n2": margin,
+        "structure": structure,
+        "significant": bool(structure and share >= SHARE_MIN),
+        "explained": not structure,
+        "inputs": inputs,
+        "carried_by": carried_by(inputs),
+        "sentence": sentence(share, gain, structure, inputs if structure else None, where),
+        "learned_world": learned_world(structure, gain, where),
         "shape": partial_dependence(model, np.concatenate(xs)),
     }
     return Unexplained(model, summary)
+
+
+def learned_world(structure: bool, gain: float | None, where: str) -> dict[str, Any]:
+    """Whether the corrected world with the learnt residual is offered, and why: only where
+    the residual shrinks what the catalogue leaves on flights it was not trained on."""
+    if structure:
+        return {
+            "offered": True,
+            "why": f"the learnt residual removes {float(gain or 0.0) * 100:.0f}% of what the "
+            f"catalogue leaves on {where}",
+        }
+    if gain is None or not np.isfinite(gain):
+        how = "n/a, because the catalogue leaves no gap there above the noise to shrink"
+    elif gain < 0.0:
+        how = f"it leaves {-gain * 100:.0f}% more than the catalogue alone"
+    elif gain < STRUCTURE_GAIN:
+        how = f"it removes {gain * 100:.0f}%, under {STRUCTURE_GAIN * 100:.0f}%"
+    else:
+        how = f"it removes {gain * 100:.0f}%, within the noise"
+    return {
+        "offered": False,
+        "why": f"the learnt residual does not shrink what the catalogue leaves on {where} ({how})",
+    }
+
+
+def _parts_gain(parts: list[Part], noise_var: float) -> float | None:
+    """The share of the systematic gap left on unseen rows that the network removes; None
+    where there is no gap above the noise to remove."""
+    left = sum(force_gap_ms(a, d.segment, d.dt_s, noise_var) * len(a) for d, a, _ in parts)
+    learnt = sum(force_gap_ms(b, d.segment, d.dt_s, noise_var) * len(b) for d, _, b in parts)
+    if left <= 0.0:
+        return None
+    return float(shrink(np.sqrt(left), np.sqrt(learnt)))
+
+
+def _held_out_parts(
+    hold: Problem, values: Values, model: ResidualModel
+) -> tuple[list[Part], np.ndarray, np.ndarray]:
+    """The held-out flights' parts, and their features and smoothed residual left by
+    `values` (the rows the leave-one-input-out networks are scored on)."""
+    xs, ys = _targets(hold, values)
+    after = [r - p for r, p in zip(hold.residuals, hold.predicted(values), strict=True)]
+    parts = [(d, a, a - model.force_n(x)) for d, a, x in zip(hold.flights, after, xs, strict=True)]
+    return parts, np.concatenate(xs), np.concatenate(ys)
 
 
 def _masked(d: FlightData, m: np.ndarray) -> FlightData:
@@ -187,47 +215,6 @@ def _masked(d: FlightData, m: np.ndarray) -> FlightData:
     breaks = np.concatenate([[0], np.cumsum(np.diff(idx) > 1)])
     segment = d.segment[idx] * 10_000 + breaks
     return dataclasses.replace(d, time_s=d.time_s[idx], segment=segment)
-
-
-def _carried(learnable: float) -> str:
-    """What a network on the regime features does on flights it was not trained on, in words:
-    a share removed, never a negative or undefined one."""
-    if not np.isfinite(learnable):
-        return (
-            "a network on the regime features could not be scored on flights it was not trained on"
-        )
-    if learnable < 0.0:
-        return (
-            "a network on the regime features does not carry over to flights it was not "
-            f"trained on (it leaves {-learnable * 100:.0f}% more than it was given)"
-        )
-    return (
-        f"a network on the regime features removes {learnable * 100:.0f}% of that on flights "
-        "it was not trained on"
-    )
-
-
-def sentence(share: float, learnable: float, significant: bool) -> str:
-    if significant:
-        return (
-            f"the catalogue leaves {share * 100:.0f}% of the systematic force gap unexplained, "
-            f"and it is structure, not noise: a network on the regime features removes "
-            f"{learnable * 100:.0f}% of it on flights it was not trained on. No catalogue "
-            "effect explains it; the effects named may stand in for one outside the catalogue"
-        )
-    head = f"the catalogue leaves {share * 100:.0f}% of the systematic force gap; " + _carried(
-        learnable
-    )
-    if share < SHARE_MIN:
-        return head + ": nothing systematic is left that the catalogue misses"
-    # a large share no function of the state carries from flight to flight: real, but not
-    # the vehicle's (a neighbour's wake, gusts), and no effect of the simulator would give it
-    return head + (
-        ": what is left is no function of the vehicle's state that holds from flight to "
-        "flight (it differs between them: another vehicle's wake, gusts, the logs "
-        "themselves; or, where the gap is near the noise floor, noise), so no effect of the "
-        "simulator's would reproduce it"
-    )
 
 
 def partial_dependence(model: ResidualModel, x: np.ndarray) -> dict[str, Any]:

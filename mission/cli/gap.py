@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -99,6 +98,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         print(f"{effect:20s} {e['status']}{shown}{why}")
     for note in result.get("notes") or []:
         print(f"note: {note}")
+    world = result.get("corrected_world") or {}
+    for m in world.get("written", []):
+        print(f"corrected world: in: {m['why']}")
+    for m in world.get("kept_out", []):
+        print(f"corrected world: out: {m['why']}")
+    if not world.get("written"):
+        print("corrected world: nothing added (no effect named present)")
     g = result["gap"]
     m = g.get("force_rms_n_measured_floor")
     if m:
@@ -110,6 +116,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     unexplained = result.get("unexplained") or {}
     if unexplained.get("sentence"):
         print(f"unexplained: {unexplained['sentence']}")
+    offer = unexplained.get("learned_world")
+    if offer:
+        state = "corrected_world_learned.yaml" if offer["offered"] else "not written"
+        print(f"learnt world: {state}: {offer['why']}")
     # the ending a reader looks for: the gaps before and after, what is left, where to read on
     print(f"force gap: {_gap(g['force_rms_n'], 1e3, 'mN')}")
     if g.get("torque_rms_n_m"):
@@ -123,11 +133,15 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
 def _pct(share: float | None) -> str:
     """A share as a percentage; never "nan%" (a share that could not be measured)."""
-    return "n/a" if share is None or not math.isfinite(share) else f"{share * 100:.0f}%"
+    from learner.gap.numbers import pct
+
+    return pct(share)
 
 
 def _fig(value: float | None, scale: float, unit: str) -> str:
-    return "n/a" if value is None or not math.isfinite(value) else f"{value * scale:.2f} {unit}"
+    from learner.gap.numbers import fig
+
+    return fig(value, ".2f", scale, unit)
 
 
 def _gap(g: dict[str, float], scale: float, unit: str) -> str:
