@@ -1,8 +1,9 @@
 """The gap diagnosis end to end on real flights (simulator and autopilot processes): a withheld
-rotor drag is found with its parameters, a null world raises no false alarm, and
-`groundfx gap diagnose` reads another vehicle's CSV through a column mapping and our own rerun
-recordings, and a bench that stopped resumes with the cases it lacks. The rotor-drag flights are flown once for the module (5 flights: 2 fitting, 1
-held out, its mission replayed in the nominal and the corrected world)."""
+rotor drag is found with its parameters, a null world raises no false alarm, `groundfx gap
+diagnose` reads another vehicle's CSV through a column mapping and our own rerun recordings,
+and a bench that stopped resumes with the cases it lacks. The rotor-drag flights are flown
+once for the module (5 flights: 2 fitting, 1 held out, its mission replayed in the nominal and
+the corrected world)."""
 
 from __future__ import annotations
 
