@@ -238,6 +238,33 @@ def test_list_cells_and_the_neural_fly_mapping(tmp_path: Path) -> None:
     assert got.acceleration_m_s2 is None
 
 
+def test_the_neural_swarm_csv_export_is_read_with_its_packaged_mapping(tmp_path: Path) -> None:
+    """Neural-Swarm's CSV layout: a '#' header with units in the names, time in
+    microseconds under `time[ms]`, world acceleration with +g, (x, y, z, w) quaternion,
+    per-rotor thrust in the Crazyflie's motor order M1 front-right .. M4 front-left."""
+    log = known_flight()
+    f = thrust_n(log)
+    q = log.quaternion
+    cols = {
+        "time[ms]": log.time_s * 1e6,
+        **{f"{a}[m]": log.position_m[:, i] for i, a in enumerate("xyz")},
+        **{f"v{a}[m/s]": log.velocity_m_s[:, i] for i, a in enumerate("xyz")},
+        **{f"a{a}[m/s^2]": (log.acceleration_m_s2 + G_UP)[:, i] for i, a in enumerate("xyz")},
+        "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3], "qw": q[:, 0],
+        **{f"u{i + 1}[N]": f[:, 3 - i] for i in range(4)},
+        "Vbat[V]": np.full(len(log), 3.9),
+        **{f"w{a}[rad/s]": log.body_rates_rad_s[:, i] for i, a in enumerate("xyz")},
+    }  # fmt: skip
+    path = write_csv(tmp_path / "cf50_00.csv", cols, header_prefix="# ")
+    got = read_log(path, load_mapping("neural_swarm"), CF)
+    assert got.time_s == pytest.approx(log.time_s)
+    assert got.position_m == pytest.approx(log.position_m)
+    assert got.quaternion == pytest.approx(log.quaternion)
+    assert got.acceleration_m_s2 == pytest.approx(log.acceleration_m_s2, abs=1e-9)
+    assert got.rotor_speeds_rad_s == pytest.approx(log.rotor_speeds_rad_s, rel=1e-8)
+    assert got.battery_v == pytest.approx(3.9)
+
+
 # ---- time units -----------------------------------------------------------------------------
 
 

@@ -22,11 +22,10 @@ from learner.flightlogs.actuators import (
 )
 from learner.flightlogs.csvtable import read_csv_columns
 from learner.flightlogs.flightlog import COLUMNS, OPTIONAL, QUAT, RATES, ROTORS, VECTORS, FlightLog
+from learner.flightlogs.packaged import MAPPINGS_DIR
 from simbridge.config import ConfigError, load_yaml, resolve_packaged
 from simbridge.frames import frd_to_flu, ned_to_enu, quat_ned_frd_to_enu_flu
 from simbridge.vehicle import Vehicle, load_vehicle
-
-MAPPINGS_DIR = Path(__file__).parent / "mappings"
 
 # Unit names a mapping may give, as factors into the format's units.
 UNIT_FACTORS: dict[str, float] = {
@@ -153,7 +152,7 @@ class ColumnMapping:
 
 
 def load_mapping(path: Path | str | None) -> ColumnMapping:
-    """A mapping YAML (or a packaged one by name: crazyflie_z, crazyflie, neural_fly):
+    """A mapping YAML (or a packaged one by name: crazyflie_z, crazyflie, neural_swarm, neural_fly):
     {names, units, quaternion_order, frame, time_unit, actuators, accelerometer}."""
     if path is None:
         return ColumnMapping()

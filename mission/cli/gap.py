@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from learner.flightlogs.packaged import packaged_mappings
 from learner.flightlogs.readers import known_formats
 from mission.cli.options import add_campaign_options
 from simbridge.config import ConfigError
@@ -30,7 +31,7 @@ def add_parser(sub: Any) -> None:
     d.add_argument("--folds", type=int, default=3, help="cross-validation folds over flights")
     d.add_argument(
         "--columns",
-        help="column mapping YAML or packaged name (crazyflie_z, crazyflie, neural_fly)",
+        help=f"column mapping YAML or packaged name ({', '.join(packaged_mappings())})",
     )
     d.add_argument(
         "--vehicle",
@@ -64,7 +65,7 @@ def add_parser(sub: Any) -> None:
     c.add_argument("out", type=Path, help="our format: .csv (with a .json sidecar) or .parquet")
     c.add_argument(
         "--columns",
-        help="column mapping YAML or packaged name (crazyflie_z, crazyflie, neural_fly)",
+        help=f"column mapping YAML or packaged name ({', '.join(packaged_mappings())})",
     )
     c.add_argument("--vehicle", default="nano", help="vehicle YAML or packaged name")
     c.set_defaults(func=cmd_convert)
