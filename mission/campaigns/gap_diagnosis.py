@@ -50,6 +50,8 @@ def run_diagnosis(
     candidates: list[str] | None = None,
     progress: bool = False,
     mass_kg: float | None = None,
+    workers: int | None = None,
+    ray_address: str | None = None,
 ) -> dict[str, Any]:
     """Diagnose, replay held-out missions closed-loop, write every output; the figures.
     The vehicle is `vehicle_name`, else the world's `vehicle:` (the simulator's, nano by
@@ -57,7 +59,9 @@ def run_diagnosis(
     from every log's z (default: found from where each flight rests on the ground);
     `candidates`: the catalogue candidates the search may choose (default: all); `progress`:
     a bar on stderr naming each stage (on a terminal); `mass_kg`: the vehicle's mass over
-    its file's (the replays fly the vehicle with it)."""
+    its file's (the replays fly the vehicle with it); `workers`, `ray_address`: where the
+    replays' flights run (the campaign runner: local processes, by default one per core, or
+    Ray tasks)."""
     if folds < 2:
         raise ConfigError(f"--folds: {folds} is outside the allowed range [2, number of logs]")
     try:
@@ -73,7 +77,8 @@ def run_diagnosis(
             bar.set_description_str(stage)
 
         result = _run(fitting, held_out, world, out, folds, columns, vehicle_name, replay,
-                      z_offset_m, candidates, on_stage, mass_kg)  # fmt: skip
+                      z_offset_m, candidates, on_stage, mass_kg,
+                      (workers, ray_address))  # fmt: skip
         bar.update(len(stages) - bar.n)
     return result
 
@@ -91,6 +96,7 @@ def _run(
     candidates: list[str] | None,
     on_stage: Callable[[str], None],
     mass_kg: float | None,
+    replays_on: tuple[int | None, str | None],
 ) -> dict[str, Any]:
     on_stage(READING)
     mapping = load_mapping(columns)
@@ -128,7 +134,7 @@ def _run(
         corrected.write_text(corrected_world_yaml(flown_world.read_text(), diagnosis))
         on_stage(REPLAYING)
         kept = [log for log in hold_logs if log.name in diagnosis.held_out]  # usable ones
-        closed_loop = replay_missions(kept, flown_world, corrected, out / "replays")
+        closed_loop = replay_missions(kept, flown_world, corrected, out / "replays", *replays_on)
     else:
         closed_loop = {"status": "skipped", "why": "not asked for (--no-replay)"}
     on_stage(WRITING)
@@ -200,41 +206,58 @@ def replay_limit_s(log: Any) -> float:
     return max(REPLAY_MIN_S, REPLAY_TIME_FACTOR * logged_s + REPLAY_MARGIN_S)
 
 
-def replay_missions(logs: list, nominal: Path, corrected: Path, out: Path) -> dict[str, Any]:
-    """Fly each held-out log's mission in the nominal and the corrected world; the RMS
-    tracking difference to the logged flight before and after. A flight that fails (the
-    corrected world cannot take off, lands nowhere, ...) is reported with its reason and
-    the others go on: the replays are one figure of the report, never its end."""
+def replay_flight(mission: str, world: str, path: str, max_flight_s: float) -> dict[str, Any]:
+    """One replay (a task of the campaign runner): the flight's log at `path`."""
+    fly_log(Path(mission), Path(world), Path(path), max_flight_s=max_flight_s)
+    return {"path": path}
+
+
+def replay_missions(
+    logs: list,
+    nominal: Path,
+    corrected: Path,
+    out: Path,
+    workers: int | None = None,
+    ray_address: str | None = None,
+) -> dict[str, Any]:
+    """Fly each held-out log's mission in the nominal and the corrected world (every flight
+    a task of the campaign runner, side by side); the RMS tracking difference to the logged
+    flight before and after. A flight that fails (the corrected world cannot take off,
+    lands nowhere, ...) is reported with its reason and the others go on: the replays are
+    one figure of the report, never its end."""
+    from mission.campaigns.runner import Task, run_tasks
+
     if not logs:
         return {"status": "skipped", "why": "no held-out logs to replay"}
     missions = [(log, log.meta.get("mission")) for log in logs]
     if not any(m for _, m in missions):
         return {"status": "skipped", "why": "the logs carry no mission"}
-    # keyed by the corrected world's content: a rerun reuses only the same world's flight
-    key = hashlib.sha256(corrected.read_bytes()).hexdigest()[:10]
-    before, after, failed = [], [], []
+    # keyed by each world's content: a rerun reuses only the same world's flight
+    keys = {w: hashlib.sha256(w.read_bytes()).hexdigest()[:10] for w in (nominal, corrected)}
+    failed, tasks = [], []
     for log, mission in missions:
         if not mission or not Path(mission).exists():
             why = "its log carries no mission" if not mission else f"mission {mission} not found"
             failed.append({"flight": log.name, "world": "nominal", "reason": why})
             continue
-        flown = {}
-        for label, world, name in (
-            ("nominal", nominal, f"{log.name}-{nominal.stem}.csv"),
-            ("corrected", corrected, f"{log.name}-corrected-{key}.csv"),
-        ):
-            try:
-                flown[label] = read_log(
-                    fly_log(Path(mission), world, out / name, max_flight_s=replay_limit_s(log))
-                )
-            except Exception as err:  # any failure of one flight is a figure, not the end
-                failed.append(
-                    {"flight": log.name, "world": label, "reason": f"{type(err).__name__}: {err}"}
-                )
-                break
-        if len(flown) == 2:
-            before.append(tracking_difference_m(log, flown["nominal"]))
-            after.append(tracking_difference_m(log, flown["corrected"]))
+        for label, world in (("nominal", nominal), ("corrected", corrected)):
+            name = f"{log.name}-{label}-{keys[world]}.csv"
+            args = (str(mission), str(world), str(out / name), replay_limit_s(log))
+            tasks.append(Task(f"{log.name}/{label}", name, replay_flight, args))
+    records = run_tasks(tasks, out / "results.jsonl", workers, ray_address, False, "replay")
+    before, after = [], []
+    for log, _ in missions:
+        flown = [records.get(f"{log.name}/{label}") for label in ("nominal", "corrected")]
+        if not all(flown):
+            continue
+        labelled = zip(("nominal", "corrected"), flown, strict=True)
+        errors = [(label, r["error"]) for label, r in labelled if "error" in r]
+        if errors:  # the first world that failed, with its reason
+            failed.append({"flight": log.name, "world": errors[0][0], "reason": errors[0][1]})
+            continue
+        nominal_log, corrected_log = (read_log(Path(r["path"])) for r in flown)
+        before.append(tracking_difference_m(log, nominal_log))
+        after.append(tracking_difference_m(log, corrected_log))
     if not before:
         return {"status": "failed", "failed": failed}
     bm, am = sum(before) / len(before), sum(after) / len(after)

@@ -55,6 +55,7 @@ def add_parser(sub: Any) -> None:
         "the others are reported as not tried), e.g. ground_effect,thrust_mass,motor_lag",
     )  # fmt: skip
     d.add_argument("--no-replay", action="store_true", help="skip the closed-loop re-flights")
+    add_campaign_options(d, "replays' flights", progress=False)
     d.add_argument("--out", type=Path, required=True, help="output folder")
     d.set_defaults(func=cmd_diagnose)
     c = g.add_parser("convert", help="write any readable flight log in our format")
@@ -88,7 +89,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         args.logs, args.holdout, args.world, args.out, args.folds, args.columns, args.vehicle,
         not args.no_replay, args.z_offset,
         args.candidates.split(",") if args.candidates else None, progress=True,
-        mass_kg=args.mass,
+        mass_kg=args.mass, workers=args.workers, ray_address=args.ray,
     )  # fmt: skip
     for effect, e in result["effects"].items():
         params = ", ".join(f"{p} {v['value']:.4g}" for p, v in (e.get("parameters") or {}).items())

@@ -93,8 +93,9 @@ def positive_int(text: str) -> int:
     return value
 
 
-def add_campaign_options(p: argparse.ArgumentParser, what: str) -> None:
-    """Where a campaign's tasks (`what`: "flights", "cases") run, and its progress bar."""
+def add_campaign_options(p: argparse.ArgumentParser, what: str, progress: bool = True) -> None:
+    """Where a campaign's tasks (`what`: "flights", "cases") run, and (`progress`) the
+    option that turns its progress bar off."""
     where = p.add_mutually_exclusive_group()
     where.add_argument(
         "--workers", type=positive_int, help=f"local processes running the {what} (default: cores)"
@@ -105,4 +106,5 @@ def add_campaign_options(p: argparse.ArgumentParser, what: str) -> None:
         help=f"run the {what} as tasks on a Ray cluster (auto, HOST:PORT, ray://HOST:PORT; "
         "local: start one here); needs the ray extra",
     )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    if progress:
+        p.add_argument("--no-progress", action="store_true", help="no progress bar")
