@@ -26,10 +26,13 @@ from learner.flightlogs.blueprint_reader import read_views
 from learner.flightlogs.recording import (
     ENTITY_PATHS,
     FLIGHT_MODE_STATE,
+    LEARNER_UPDATES,
     MISSION_LABELS,
     MISSION_PATH,
+    MODEL_STATE,
     OBSTACLES,
     PHASE_STATE,
+    REVIEW,
     STATES,
     TIMELINE,
     TRAJECTORY,
@@ -128,7 +131,13 @@ def test_the_default_blueprint_shows_what_is_recorded(flown):
         v["ViewBlueprint:display_name"][0]: v["ViewBlueprint:space_origin"][0]
         for v in views.values()
     }
-    assert {"world", "z and its setpoint (m)", "ground effect z (N)", "events"} <= set(origins)
+    assert len(reader.blueprints()) == 1  # the final layout only: the viewer has no choice
+    assert {
+        "the landing (3-D)",
+        "near the ground: z - setpoint (mm)",
+        "ground-effect model: predicted - true, vertical (mN)",
+        "events",
+    } <= set(origins)
     for name, origin in origins.items():  # every view looks at something in the recording
         assert any(p == origin or p.startswith(origin + "/") for p in recording.entities), name
 
@@ -171,8 +180,11 @@ def test_a_recording_cut_in_the_middle_of_a_message_reads_up_to_the_cut(flown, t
     cut.write_bytes(whole[: len(whole) * 2 // 3 + 7])  # no footer, half a message at the end
     recording = read_recording(cut)
     assert not recording.complete
-    t = recording.trajectory()[:, 0]
-    assert 0.3 * flown[0]["sim_s"] < t[-1] < flown[0]["sim_s"]
+    # what it holds is the flight as flown, as far as it goes (the finished file is written
+    # in one chunk per entity: the cut may fall after all the trajectory's rows)
+    got = recording.trajectory()
+    assert 0 < len(got) <= flown[0]["steps"]
+    assert np.array_equal(got[:, 1:], flown[1][: len(got), 1:], equal_nan=True)
 
 
 def test_a_killed_autopilot_leaves_a_recording_up_to_shortly_before_the_kill(tmp_path):
@@ -208,7 +220,8 @@ def test_the_recorder_takes_learner_reports_and_events_from_the_loop(tmp_path):
     home = Home(59.0, 18.0, 0.0)
     plan = plan_steps(load_mission_file(EXAMPLES / "square.yaml", home).items, home, 0.0)
     path = tmp_path / "unit.rrd"
-    recorder = FlightRecorder(RecordOptions(path), load_vehicle(), MODES)
+    info = {"model": "neural", "online": "rls"}
+    recorder = FlightRecorder(RecordOptions(path, info=info), load_vehicle(), MODES)
     recorder.mission(plan, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
     recorder.watch_counters("gcs", lambda: (7, 1, 2))
     msgs = Step({"time_usec": 0}, {}, set())
@@ -218,15 +231,28 @@ def test_the_recorder_takes_learner_reports_and_events_from_the_loop(tmp_path):
         mode = "flying" if k >= 300 else "holding"
         speeds = (70.0, 70.0, 70.0, 70.0)
         recorder.step(t, msgs, state, t, mode, True, Setpoint((0, 0, 1)), (0, 0, 0), speeds, None)
+        if k == 400:  # an update the guards turned down: the weights stay at version 0
+            recorder.learner(t, loss=0.5, version=0, note="rejected: holdout RMSE rose 40%")
         if k == 500:
-            recorder.learner(t, loss=0.25, version=1)
+            recorder.learner(t, loss=0.25, version=1, note="accepted")
             recorder.event("failsafe: link lost", "WARN")
     recorder.close("landed")
     recording = read_recording(path)
     t_version, version = recording.scalars("plots/learner/version")
-    assert version[:, 0].tolist() == [0.0, 1.0] and t_version[1] == pytest.approx(2.0)
-    assert recording.scalars("plots/learner/loss")[1][:, 0].tolist() == [0.25]
-    assert recording.scalars("plots/learner/log10_loss")[1][:, 0] == pytest.approx([-0.60206])
+    assert version[:, 0].tolist() == [0.0, 0.0, 1.0] and t_version[2] == pytest.approx(2.0)
+    assert recording.scalars("plots/learner/loss")[1][:, 0].tolist() == [0.5, 0.25]
+    assert recording.scalars("plots/learner/log10_loss")[1][:, 0] == pytest.approx(
+        [-0.30103, -0.60206]
+    )
+    # each update's fate with its reason; the model in use as a named state, as it changes
+    updates = recording.texts(LEARNER_UPDATES)
+    assert [(level, text) for _, level, text in updates] == [
+        ("WARN", "rejected: holdout RMSE rose 40%"),
+        ("INFO", "accepted"),
+    ]
+    models = [str(s) for s in recording.values(MODEL_STATE, "StateChange:state")]
+    assert models == ["neural, weights v0", "neural, weights v1"]
+    assert recording.times(MODEL_STATE)[-1] == pytest.approx(2.0)
     assert (pytest.approx(2.0), "WARN", "failsafe: link lost") in recording.texts()
     assert recording.scalars("plots/mavlink/gcs")[1][-1].tolist() == [7.0, 1.0, 2.0]
     assert len(recording.times("plots/rotors/actual")) == 0  # no ESC telemetry came
@@ -347,12 +373,12 @@ def test_the_layout_shows_data_in_every_view_and_tells_its_series_apart(flown):
     recording = read_recording(summary["recording"])
     views = read_views(summary["recording"])
     paths = recording.entity_paths()
-    assert {"world", "events", "z and its setpoint (m)", "rotor speeds (rad/s)"} <= {
+    assert {"the landing (3-D)", "events", "z and its setpoint (m)", "n0: cmd - ESC"} <= {
         v.name for v in views
     }
     assert not any(v.origin.startswith("plots/learner") for v in views)  # nothing learnt
     for view in views:
-        shown = [p for p in _view_entities(view, paths) if len(recording.times(p))]
+        shown = [p for p in _view_entities(view, paths) if recording.entities[p].chunks]
         assert shown, f"the view {view.name!r} has no data"
         if view.kind != "TimeSeries":
             continue
@@ -362,15 +388,63 @@ def test_the_layout_shows_data_in_every_view_and_tells_its_series_apart(flown):
             colors += np.atleast_1d(recording.static(p, "SeriesLines:colors")).tolist()
         assert len(set(names)) == len(names), f"{view.name}: {names}"
         assert len(set(colors)) == len(colors), f"{view.name}: {colors}"
-    # flight mode and phase as named states, in the order the flight went through them
+    # flight mode, phase and model as named states, in the order the flight went through them
     states = next(v for v in views if v.kind == "StateTimeline")
     assert states.origin == STATES
     phases = [str(s) for s in recording.values(PHASE_STATE, "StateChange:state")]
     assert phases[0] == "disarmed" and phases[-2:] == ["landing", "landed"]
     assert "mission" in [str(s) for s in recording.values(FLIGHT_MODE_STATE, "StateChange:state")]
+    assert [str(s) for s in recording.values(MODEL_STATE, "StateChange:state")] == ["analytic"]
     z_view = next(v for v in views if v.name.startswith("z and"))
     low, high = z_view.y_range
     assert -0.2 < low <= log[:, 3].min() and log[:, 3].max() <= high < 2.0
+    # the landing in words, as the flight's summary has it
+    review = recording.static(REVIEW, "TextDocument:text")
+    error_mm = summary["landing_error_m"] * 1e3
+    assert f"landed {error_mm:.1f} mm from the landing point" in review
+    assert f"at {summary['touchdown_speed_m_s']:.2f} m/s" in review
+
+
+def _view_series(recording, view, paths):
+    """The series a time-series view draws: (path, column) -> (times, values)."""
+    out = {}
+    for p in _view_entities(view, paths):
+        if p in recording.entities and len(recording.times(p, "Scalars:scalars")):
+            t, values = recording.scalars(p)
+            out.update({(p, i): (t, values[:, i]) for i in range(values.shape[1])})
+    return out
+
+
+def test_the_review_views_read_at_a_glance(flown):
+    """At the view height viewer_checks assumes (250 px): every value axis labels at least
+    three ticks over what it shows, and no two series of a view lie within a few pixels of
+    each other for most of the flight unless the layout shows their difference."""
+    from learner.flightlogs.recording import DIFFERENCES
+    from tests.viewer_checks import labelled_ticks, share_on_top, shown_range
+
+    recording = read_recording(flown[0]["recording"])
+    views = [v for v in read_views(flown[0]["recording"]) if v.kind == "TimeSeries"]
+    paths = recording.entity_paths()
+    shown = {p for v in views for p in _view_entities(v, paths)}
+    told_apart = {frozenset(pair) for d, pair in DIFFERENCES.items() if d in shown}
+    for path in ("plots/height_error_mm", "plots/model_error_mn"):  # in millimetres, millinewtons
+        view = next(v for v in views if v.origin == path)
+        assert view.y_range is not None and len(labelled_ticks(*view.y_range)) >= 3, view
+    for view in views:
+        series = _view_series(recording, view, paths)
+        y_range = shown_range([v for _, v in series.values()], view.y_range)
+        ticks = labelled_ticks(*y_range)
+        assert len(ticks) >= 3, f"{view.name}: {y_range} labels only {ticks}"
+        keys = sorted(series)
+        for i, a in enumerate(keys):
+            for b in keys[i + 1 :]:
+                together = share_on_top(series[a], series[b], y_range)
+                if together > 0.5:
+                    assert frozenset((a, b)) in told_apart, f"{view.name}: {a} on {b}"
+    # the hold is read to the millimetre: a tick a millimetre apart or finer
+    hold = next(v for v in views if v.origin == "plots/height_error_mm")
+    ticks = labelled_ticks(*hold.y_range)
+    assert ticks[1] - ticks[0] <= 1.0 + 1e-9
 
 
 def test_the_report_says_what_the_learner_did_and_why_it_published_little():
