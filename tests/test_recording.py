@@ -304,11 +304,10 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_review_web_serves_the_viewer_on_a_headless_machine(flown):
-    web, grpc = _free_port(), _free_port()
+def _serve_web(recording: str, web: int, grpc: int) -> subprocess.Popen:
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    command = [sys.executable, "-m", "mission.cli", "review", flown[0]["recording"], "--web"]
-    review = subprocess.Popen(
+    command = [sys.executable, "-m", "mission.cli", "review", recording, "--web"]
+    return subprocess.Popen(
         [*command, "--web-port", str(web), "--grpc-port", str(grpc)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -316,24 +315,39 @@ def test_review_web_serves_the_viewer_on_a_headless_machine(flown):
         env=env,
         cwd=REPO,
     )
+
+
+def _wait_for_page(web: int, review: subprocess.Popen, timeout_s: float = 30.0) -> str:
+    page, deadline = "", time.monotonic() + timeout_s
+    while time.monotonic() < deadline and review.poll() is None:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=2) as response:
+                return response.read().decode("utf-8", "replace")
+        except OSError:
+            time.sleep(0.2)
+    assert review.poll() is None, review.communicate()
+    return page
+
+
+def _stop_review(review: subprocess.Popen) -> str:
+    review.send_signal(signal.SIGINT)  # Ctrl-C: the viewer's server ignores SIGTERM
     try:
-        page, deadline = "", time.monotonic() + 30
-        while time.monotonic() < deadline and review.poll() is None:
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=2) as response:
-                    page = response.read().decode("utf-8", "replace")
-                break
-            except OSError:
-                time.sleep(0.2)
+        out, _ = review.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        review.kill()
+        out, _ = review.communicate()
+    return out
+
+
+def test_review_web_serves_the_viewer_on_a_headless_machine(flown):
+    web, grpc = _free_port(), _free_port()
+    review = _serve_web(flown[0]["recording"], web, grpc)
+    try:
+        page = _wait_for_page(web, review)
         assert review.poll() is None, review.communicate()
         assert "<html" in page.lower()
     finally:
-        review.send_signal(signal.SIGINT)  # Ctrl-C: the viewer's server ignores SIGTERM
-        try:
-            out, _ = review.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            review.kill()
-            out, _ = review.communicate()
+        out = _stop_review(review)
     assert "groundfx review:" in out and f"127.0.0.1:{web}" in out
 
 
@@ -478,3 +492,44 @@ def test_the_report_says_what_the_learner_did_and_why_it_published_little():
     )
     texts = " ".join(x["text"] for x in (*a.values(), *offline.values()))
     assert "nan" not in texts and "ESC" in offline["rotors"]["text"]
+
+
+def test_the_web_viewer_shows_the_hold_and_the_model_error_without_a_click(flown):
+    """Debian's Chromium, headless with software WebGL, on `groundfx review REC --web`: once
+    the flight has loaded, the height error and the model error are drawn across the upper
+    right of the page, one above the other, with no click."""
+    from autopilot.recording.series_style import HOLD_COLOR, MODEL_ERROR_COLOR
+    from tests.chromium import Chromium, find_chromium
+    from tests.viewer_checks import drawn
+
+    binary = find_chromium()
+    if binary is None:
+        pytest.skip("no Chromium to drive (Debian: apt-get install chromium)")
+    web, grpc = _free_port(), _free_port()
+    review = _serve_web(flown[0]["recording"], web, grpc)
+    width, height = 1600, 1000
+    upper_right = (width // 2, 0, width, int(height * 0.6))
+    seen: dict[str, dict] = {}
+
+    def both_drawn() -> bool:
+        image = np.asarray(browser.screenshot(box=upper_right))  # the part to look at only
+        whole = (0, 0, image.shape[1], image.shape[0])
+        seen["hold"] = drawn(image, HOLD_COLOR, whole)
+        seen["model"] = drawn(image, MODEL_ERROR_COLOR, whole)
+        # across the page's right half: the flight's whole time span (the hold's line leaves
+        # its view during the take-off, a metre off its setpoint)
+        return all(s["extent"] > 0.6 for s in seen.values())
+
+    try:
+        _wait_for_page(web, review)
+        with Chromium(binary, width, height) as browser:
+            browser.open(
+                f"http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc}%2Fproxy"
+            )
+            try:
+                wait_for(both_drawn, "the hold and the model error drawn", review, 240)
+            except AssertionError as err:
+                raise AssertionError(f"{err}; last seen: {seen}") from None
+    finally:
+        _stop_review(review)
+    assert seen["hold"]["row"] < seen["model"]["row"]  # the hold above the model's error

@@ -58,3 +58,26 @@ def share_on_top(
     on_a = np.clip(va[both], low, high)
     on_b = np.clip(np.interp(ta[both], tb, vb), low, high)
     return float(np.mean(np.abs(on_a - on_b) * px < CLOSE_PX)) if both.any() else 0.0
+
+
+# A line's pixels are its colour blended with the white background: alpha * colour + (1 -
+# alpha) * white, the same alpha in every channel (grey grid lines and other colours are not).
+MIN_ALPHA, ALPHA_SPREAD = 0.35, 0.15
+MIN_LINE_PIXELS = 150
+
+
+def drawn(image: np.ndarray, color: tuple[int, int, int], box: tuple[int, int, int, int]) -> dict:
+    """Where a series of `color` is drawn within box (left, top, right, bottom) of a screenshot
+    [H, W, 3]: its pixel count, mean row and horizontal extent (share of the box's width)."""
+    left, top, right, bottom = box
+    part = image[top:bottom, left:right].astype(float)
+    alpha = (255.0 - part) / (255.0 - np.asarray(color, dtype=float))
+    hit = (alpha.min(axis=2) > MIN_ALPHA) & (alpha.max(axis=2) - alpha.min(axis=2) < ALPHA_SPREAD)
+    rows, cols = np.nonzero(hit)
+    if len(cols) < MIN_LINE_PIXELS:
+        return {"pixels": len(cols), "row": None, "extent": 0.0}
+    return {
+        "pixels": len(cols),
+        "row": float(top + rows.mean()),
+        "extent": float((cols.max() - cols.min()) / (right - left)),
+    }

@@ -136,7 +136,7 @@ def default_blueprint(
     return rrb.Blueprint(
         rrb.Vertical(
             rrb.Horizontal(landing, hold_and_model, column_shares=[1, 1]),
-            rrb.Horizontal(learner, rotors, column_shares=[2, 3]),
+            rrb.Horizontal(learner, rotors, column_shares=[1, 1]),
             row_shares=[5, 4],
         ),
         # collapsed: its streams would take a fifth of the page; following: the time cursor
