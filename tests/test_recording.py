@@ -247,11 +247,11 @@ def test_the_recorder_takes_learner_reports_and_events_from_the_loop(tmp_path):
     # each update's fate with its reason; the model in use as a named state, as it changes
     updates = recording.texts(LEARNER_UPDATES)
     assert [(level, text) for _, level, text in updates] == [
-        ("WARN", "rejected: holdout RMSE rose 40%"),
-        ("INFO", "accepted"),
+        ("WARN", "rejected: holdout RMSE rose 40% (loss 0.5, weights v0)"),
+        ("INFO", "accepted (loss 0.25, weights v1)"),
     ]
     models = [str(s) for s in recording.values(MODEL_STATE, "StateChange:state")]
-    assert models == ["neural, weights v0", "neural, weights v1"]
+    assert models == ["neural, offline weights", "neural, adapted online"]
     assert recording.times(MODEL_STATE)[-1] == pytest.approx(2.0)
     assert (pytest.approx(2.0), "WARN", "failsafe: link lost") in recording.texts()
     assert recording.scalars("plots/mavlink/gcs")[1][-1].tolist() == [7.0, 1.0, 2.0]
@@ -387,7 +387,7 @@ def test_the_layout_shows_data_in_every_view_and_tells_its_series_apart(flown):
     recording = read_recording(summary["recording"])
     views = read_views(summary["recording"])
     paths = recording.entity_paths()
-    assert {"the landing (3-D)", "events", "z and its setpoint (m)", "n0: cmd - ESC"} <= {
+    assert {"the landing (3-D)", "events", "z and its setpoint (m)", "n0 cmd-ESC"} <= {
         v.name for v in views
     }
     assert not any(v.origin.startswith("plots/learner") for v in views)  # nothing learnt

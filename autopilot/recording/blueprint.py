@@ -70,10 +70,10 @@ def _series(origin: str, name: str, ranges: Ranges) -> rrb.TimeSeriesView:
     )
 
 
-def _event_log() -> rrb.TextLogView:
-    return rrb.TextLogView(  # time, level and text: the entity path is always `events`
-        origin=EVENTS,
-        name="events",
+def _log(origin: str, name: str) -> rrb.TextLogView:
+    return rrb.TextLogView(  # time, level and text: the entity path is always the origin
+        origin=origin,
+        name=name,
         columns=rrb.TextLogColumns(
             text_log_columns=[
                 rrbc.TextLogColumn("entitypath", visible=False),
@@ -90,7 +90,7 @@ def _more(z_view_m: tuple[float, float], learning: bool, ranges: Ranges) -> rrb.
     updates = [rrb.TextLogView(origin=LEARNER_UPDATES, name="learner updates")] if learning else []
     return rrb.Tabs(
         *updates,
-        _event_log(),
+        _log(EVENTS, "events"),
         rrb.TimeSeriesView(
             origin="plots/z", name="z and its setpoint (m)", axis_y=rrb.ScalarAxis(range=z_view_m)
         ),
@@ -131,7 +131,7 @@ def default_blueprint(
         states, rrb.Horizontal(*loss, _more(z_view_m, learning, ranges)), row_shares=[1, 1]
     )
     rotors = rrb.Horizontal(
-        *(_series(p, f"n{i}: cmd - ESC", ranges) for i, p in enumerate(ROTOR_VIEWS))
+        *(_series(p, f"n{i} cmd-ESC", ranges) for i, p in enumerate(ROTOR_VIEWS))
     )
     return rrb.Blueprint(
         rrb.Vertical(

@@ -328,8 +328,14 @@ class FlightRecorder:
         self._flush_deadline = time.perf_counter() + FLUSH_WALL_S
 
     def _send_learner_notes(self, learned: list[tuple[float, float, float, str, str]]) -> None:
-        """Each update's fate in the learner's log; the model in use as a named state."""
-        notes = [(t, note) for t, _, _, note, _ in learned if note]
+        """Each update's fate in the learner's log (with its loss and the weights then in
+        use); the model in use as a named state: the offline weights, adapted (to which
+        ground, for `composite`), or reset."""
+        notes = [
+            (t, note + ("" if math.isnan(loss) else f" (loss {loss:.3g}, weights v{version:.0f})"))
+            for t, loss, version, note, _ in learned
+            if note
+        ]
         if notes:
             self._send(
                 LEARNER_UPDATES,
@@ -340,11 +346,15 @@ class FlightRecorder:
                 ),
             )
         model = str(self._info.get("model") or "model")
-        for t, _, version, _, ground in learned:
+        for t, _, version, note, ground in learned:
             if math.isnan(version):
                 continue
-            state = model if not self._learning else f"{model}, weights v{int(version)}"
-            state += f", ground {ground}" if ground else ""
+            if not self._learning:
+                state = model
+            elif version == 0 or note == "reset":
+                state = f"{model}, offline weights" + (" (reset)" if note == "reset" else "")
+            else:
+                state = f"{model}, adapted online" + (f" to ground {ground}" if ground else "")
             if state != self._model_state:
                 self._model_state = state
                 self._state_changed(t, MODEL_STATE, state)
