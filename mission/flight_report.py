@@ -13,7 +13,6 @@ recorded flight. This module reads and answers; `mission/flight_report_page.py` 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,6 +20,12 @@ from typing import Any
 import numpy as np
 
 from autopilot.metrics import NEAR_GROUND_M, settled_halves
+from autopilot.recording.review import (
+    landing_sentence,
+    learner_sentence,
+    number,
+    online_method,
+)
 
 PNG_SUFFIX = ".report.png"
 JSON_SUFFIX = ".report.json"
@@ -84,18 +89,8 @@ def read_series(rec: Any) -> Series:
                   lt, loss[:, 0], vt, version[:, 0])  # fmt: skip
 
 
-def online_method(summary: dict[str, Any], meta: dict[str, Any]) -> str | None:
-    """The online learning method the flight used; None for none ("off" in the metadata)."""
-    method = summary.get("online_method") or meta.get("online")
-    return None if method in (None, "", "off", "none") else str(method)
-
-
 def _mm(value: Any) -> float | None:
     return None if value is None else float(value) * 1e3
-
-
-def _num(value: float | None, fmt: str) -> str:
-    return "n/a" if value is None or not math.isfinite(value) else format(value, fmt)
 
 
 def answers(summary: dict[str, Any], meta: dict[str, Any], s: Series) -> dict[str, Any]:
@@ -109,11 +104,7 @@ def answers(summary: dict[str, Any], meta: dict[str, Any], s: Series) -> dict[st
         "touchdown_speed_m_s": speed,
         "bounce_mm": _mm(summary.get("bounce_m")),
         "touchdown_time_s": summary.get("touchdown_time_s"),
-        "text": (
-            f"landed {_num(error_mm, '.1f')} mm from the landing point at {_num(speed, '.2f')} m/s"
-            if landed
-            else f"did not land: {summary.get('ended')}"
-        ),
+        "text": landing_sentence(summary),
     }
     settled = settled_halves(s.near_hold)
     err = (s.z_m[settled] - s.z_setpoint_m[settled]) * 1e3 if settled.any() else np.zeros(0)
@@ -124,7 +115,7 @@ def answers(summary: dict[str, Any], meta: dict[str, Any], s: Series) -> dict[st
         "mean_mm": float(np.mean(err)) if len(err) else None,
     }
     hold["text"] = (
-        f"held {_num(hold['rms_mm'], '.2f')} mm RMS (worst {_num(hold['max_mm'], '.2f')} mm) "
+        f"held {number(hold['rms_mm'], '.2f')} mm RMS (worst {number(hold['max_mm'], '.2f')} mm) "
         f"from its setpoint within {NEAR_GROUND_M * 100:.0f} cm of the ground, once settled"
         if len(err)
         else f"no hold within {NEAR_GROUND_M * 100:.0f} cm of the ground"
@@ -139,8 +130,8 @@ def answers(summary: dict[str, Any], meta: dict[str, Any], s: Series) -> dict[st
         "hold_rms_mn": float(np.sqrt(np.mean(hold_error**2))) * 1e3 if len(hold_error) else None,
     }
     model["text"] = (
-        f"the {model_name} model was {_num(model['hold_rms_mn'], '.1f')} mN RMS off the true "
-        f"ground effect in the hold, {_num(model['far_rms_mn'], '.2f')} mN far from the ground"
+        f"the {model_name} model was {number(model['hold_rms_mn'], '.1f')} mN RMS off the true "
+        f"ground effect in the hold, {number(model['far_rms_mn'], '.2f')} mN far from the ground"
         if len(s.ge_time_s)
         else "no true ground effect recorded to compare the model with"
     )
@@ -152,29 +143,9 @@ def answers(summary: dict[str, Any], meta: dict[str, Any], s: Series) -> dict[st
                ("updates", "accepted", "rejected", "held", "version", "loss_first",
                 "loss_last", "reject_reasons", "ground", "grounds", "held_evidence")},
         }  # fmt: skip
-        why = learner["reject_reasons"] or {}
-        reasons = "; ".join(f"{k}: {v}" for k, v in why.items())
-        evidence = learner.get("held_evidence")
-        ratios = (
-            f" (likelihood ratio median {evidence['median']:.3g}, largest {evidence['max']:.4g}"
-            f", against {evidence['threshold']:g})"
-            if evidence
-            else ""
-        )
-        learner["text"] = (
-            f"online {method}: {learner['updates']} updates, {learner['accepted']} accepted, "
-            f"{learner['rejected']} rejected; weights version {learner['version']}"
-            + (f" (rejected for {reasons})" if reasons else "")
-            + (
-                f"; {learner['held']} held: the evidence for a change under its confidence "
-                f"threshold{ratios}"
-                if learner.get("held")
-                else ""
-            )
-            + (f"; active ground {learner['ground']}" if learner.get("ground") else "")
-        )
+        learner["text"] = learner_sentence(summary, meta)
     else:
-        learner = {"method": None, "text": "no online learning: the model stayed as loaded"}
+        learner = {"method": None, "text": learner_sentence(summary, meta)}
     d = s.rotor_difference_rad_s
     rotors = {
         "rms_difference_rad_s": [float(np.sqrt(np.mean(d[:, i] ** 2))) for i in range(4)]

@@ -26,10 +26,13 @@ from learner.flightlogs.blueprint_reader import read_views
 from learner.flightlogs.recording import (
     ENTITY_PATHS,
     FLIGHT_MODE_STATE,
+    LEARNER_UPDATES,
     MISSION_LABELS,
     MISSION_PATH,
+    MODEL_STATE,
     OBSTACLES,
     PHASE_STATE,
+    REVIEW,
     STATES,
     TIMELINE,
     TRAJECTORY,
@@ -128,7 +131,13 @@ def test_the_default_blueprint_shows_what_is_recorded(flown):
         v["ViewBlueprint:display_name"][0]: v["ViewBlueprint:space_origin"][0]
         for v in views.values()
     }
-    assert {"world", "z and its setpoint (m)", "ground effect z (N)", "events"} <= set(origins)
+    assert len(reader.blueprints()) == 1  # the final layout only: the viewer has no choice
+    assert {
+        "the landing (3-D)",
+        "near the ground: z - setpoint (mm)",
+        "ground-effect model: predicted - true, vertical (mN)",
+        "events",
+    } <= set(origins)
     for name, origin in origins.items():  # every view looks at something in the recording
         assert any(p == origin or p.startswith(origin + "/") for p in recording.entities), name
 
@@ -171,8 +180,11 @@ def test_a_recording_cut_in_the_middle_of_a_message_reads_up_to_the_cut(flown, t
     cut.write_bytes(whole[: len(whole) * 2 // 3 + 7])  # no footer, half a message at the end
     recording = read_recording(cut)
     assert not recording.complete
-    t = recording.trajectory()[:, 0]
-    assert 0.3 * flown[0]["sim_s"] < t[-1] < flown[0]["sim_s"]
+    # what it holds is the flight as flown, as far as it goes (the finished file is written
+    # in one chunk per entity: the cut may fall after all the trajectory's rows)
+    got = recording.trajectory()
+    assert 0 < len(got) <= flown[0]["steps"]
+    assert np.array_equal(got[:, 1:], flown[1][: len(got), 1:], equal_nan=True)
 
 
 def test_a_killed_autopilot_leaves_a_recording_up_to_shortly_before_the_kill(tmp_path):
@@ -208,7 +220,8 @@ def test_the_recorder_takes_learner_reports_and_events_from_the_loop(tmp_path):
     home = Home(59.0, 18.0, 0.0)
     plan = plan_steps(load_mission_file(EXAMPLES / "square.yaml", home).items, home, 0.0)
     path = tmp_path / "unit.rrd"
-    recorder = FlightRecorder(RecordOptions(path), load_vehicle(), MODES)
+    info = {"model": "neural", "online": "rls"}
+    recorder = FlightRecorder(RecordOptions(path, info=info), load_vehicle(), MODES)
     recorder.mission(plan, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
     recorder.watch_counters("gcs", lambda: (7, 1, 2))
     msgs = Step({"time_usec": 0}, {}, set())
@@ -218,15 +231,28 @@ def test_the_recorder_takes_learner_reports_and_events_from_the_loop(tmp_path):
         mode = "flying" if k >= 300 else "holding"
         speeds = (70.0, 70.0, 70.0, 70.0)
         recorder.step(t, msgs, state, t, mode, True, Setpoint((0, 0, 1)), (0, 0, 0), speeds, None)
+        if k == 400:  # an update the guards turned down: the weights stay at version 0
+            recorder.learner(t, loss=0.5, version=0, note="rejected: holdout RMSE rose 40%")
         if k == 500:
-            recorder.learner(t, loss=0.25, version=1)
+            recorder.learner(t, loss=0.25, version=1, note="accepted")
             recorder.event("failsafe: link lost", "WARN")
     recorder.close("landed")
     recording = read_recording(path)
     t_version, version = recording.scalars("plots/learner/version")
-    assert version[:, 0].tolist() == [0.0, 1.0] and t_version[1] == pytest.approx(2.0)
-    assert recording.scalars("plots/learner/loss")[1][:, 0].tolist() == [0.25]
-    assert recording.scalars("plots/learner/log10_loss")[1][:, 0] == pytest.approx([-0.60206])
+    assert version[:, 0].tolist() == [0.0, 0.0, 1.0] and t_version[2] == pytest.approx(2.0)
+    assert recording.scalars("plots/learner/loss")[1][:, 0].tolist() == [0.5, 0.25]
+    assert recording.scalars("plots/learner/log10_loss")[1][:, 0] == pytest.approx(
+        [-0.30103, -0.60206]
+    )
+    # each update's fate with its reason; the model in use as a named state, as it changes
+    updates = recording.texts(LEARNER_UPDATES)
+    assert [(level, text) for _, level, text in updates] == [
+        ("WARN", "rejected: holdout RMSE rose 40% (loss 0.5, weights v0)"),
+        ("INFO", "accepted (loss 0.25, weights v1)"),
+    ]
+    models = [str(s) for s in recording.values(MODEL_STATE, "StateChange:state")]
+    assert models == ["neural, offline weights", "neural, adapted online"]
+    assert recording.times(MODEL_STATE)[-1] == pytest.approx(2.0)
     assert (pytest.approx(2.0), "WARN", "failsafe: link lost") in recording.texts()
     assert recording.scalars("plots/mavlink/gcs")[1][-1].tolist() == [7.0, 1.0, 2.0]
     assert len(recording.times("plots/rotors/actual")) == 0  # no ESC telemetry came
@@ -278,11 +304,10 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_review_web_serves_the_viewer_on_a_headless_machine(flown):
-    web, grpc = _free_port(), _free_port()
+def _serve_web(recording: str, web: int, grpc: int) -> subprocess.Popen:
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    command = [sys.executable, "-m", "mission.cli", "review", flown[0]["recording"], "--web"]
-    review = subprocess.Popen(
+    command = [sys.executable, "-m", "mission.cli", "review", recording, "--web"]
+    return subprocess.Popen(
         [*command, "--web-port", str(web), "--grpc-port", str(grpc)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -290,24 +315,39 @@ def test_review_web_serves_the_viewer_on_a_headless_machine(flown):
         env=env,
         cwd=REPO,
     )
+
+
+def _wait_for_page(web: int, review: subprocess.Popen, timeout_s: float = 30.0) -> str:
+    page, deadline = "", time.monotonic() + timeout_s
+    while time.monotonic() < deadline and review.poll() is None:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=2) as response:
+                return response.read().decode("utf-8", "replace")
+        except OSError:
+            time.sleep(0.2)
+    assert review.poll() is None, review.communicate()
+    return page
+
+
+def _stop_review(review: subprocess.Popen) -> str:
+    review.send_signal(signal.SIGINT)  # Ctrl-C: the viewer's server ignores SIGTERM
     try:
-        page, deadline = "", time.monotonic() + 30
-        while time.monotonic() < deadline and review.poll() is None:
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=2) as response:
-                    page = response.read().decode("utf-8", "replace")
-                break
-            except OSError:
-                time.sleep(0.2)
+        out, _ = review.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        review.kill()
+        out, _ = review.communicate()
+    return out
+
+
+def test_review_web_serves_the_viewer_on_a_headless_machine(flown):
+    web, grpc = _free_port(), _free_port()
+    review = _serve_web(flown[0]["recording"], web, grpc)
+    try:
+        page = _wait_for_page(web, review)
         assert review.poll() is None, review.communicate()
         assert "<html" in page.lower()
     finally:
-        review.send_signal(signal.SIGINT)  # Ctrl-C: the viewer's server ignores SIGTERM
-        try:
-            out, _ = review.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            review.kill()
-            out, _ = review.communicate()
+        out = _stop_review(review)
     assert "groundfx review:" in out and f"127.0.0.1:{web}" in out
 
 
@@ -347,12 +387,12 @@ def test_the_layout_shows_data_in_every_view_and_tells_its_series_apart(flown):
     recording = read_recording(summary["recording"])
     views = read_views(summary["recording"])
     paths = recording.entity_paths()
-    assert {"world", "events", "z and its setpoint (m)", "rotor speeds (rad/s)"} <= {
+    assert {"the landing (3-D)", "events", "z and its setpoint (m)", "n0 cmd-ESC"} <= {
         v.name for v in views
     }
     assert not any(v.origin.startswith("plots/learner") for v in views)  # nothing learnt
     for view in views:
-        shown = [p for p in _view_entities(view, paths) if len(recording.times(p))]
+        shown = [p for p in _view_entities(view, paths) if recording.entities[p].chunks]
         assert shown, f"the view {view.name!r} has no data"
         if view.kind != "TimeSeries":
             continue
@@ -362,15 +402,63 @@ def test_the_layout_shows_data_in_every_view_and_tells_its_series_apart(flown):
             colors += np.atleast_1d(recording.static(p, "SeriesLines:colors")).tolist()
         assert len(set(names)) == len(names), f"{view.name}: {names}"
         assert len(set(colors)) == len(colors), f"{view.name}: {colors}"
-    # flight mode and phase as named states, in the order the flight went through them
+    # flight mode, phase and model as named states, in the order the flight went through them
     states = next(v for v in views if v.kind == "StateTimeline")
     assert states.origin == STATES
     phases = [str(s) for s in recording.values(PHASE_STATE, "StateChange:state")]
     assert phases[0] == "disarmed" and phases[-2:] == ["landing", "landed"]
     assert "mission" in [str(s) for s in recording.values(FLIGHT_MODE_STATE, "StateChange:state")]
+    assert [str(s) for s in recording.values(MODEL_STATE, "StateChange:state")] == ["analytic"]
     z_view = next(v for v in views if v.name.startswith("z and"))
     low, high = z_view.y_range
     assert -0.2 < low <= log[:, 3].min() and log[:, 3].max() <= high < 2.0
+    # the landing in words, as the flight's summary has it
+    review = recording.static(REVIEW, "TextDocument:text")
+    error_mm = summary["landing_error_m"] * 1e3
+    assert f"landed {error_mm:.1f} mm from the landing point" in review
+    assert f"at {summary['touchdown_speed_m_s']:.2f} m/s" in review
+
+
+def _view_series(recording, view, paths):
+    """The series a time-series view draws: (path, column) -> (times, values)."""
+    out = {}
+    for p in _view_entities(view, paths):
+        if p in recording.entities and len(recording.times(p, "Scalars:scalars")):
+            t, values = recording.scalars(p)
+            out.update({(p, i): (t, values[:, i]) for i in range(values.shape[1])})
+    return out
+
+
+def test_the_review_views_read_at_a_glance(flown):
+    """At the view height viewer_checks assumes (250 px): every value axis labels at least
+    three ticks over what it shows, and no two series of a view lie within a few pixels of
+    each other for most of the flight unless the layout shows their difference."""
+    from learner.flightlogs.recording import DIFFERENCES
+    from tests.viewer_checks import labelled_ticks, share_on_top, shown_range
+
+    recording = read_recording(flown[0]["recording"])
+    views = [v for v in read_views(flown[0]["recording"]) if v.kind == "TimeSeries"]
+    paths = recording.entity_paths()
+    shown = {p for v in views for p in _view_entities(v, paths)}
+    told_apart = {frozenset(pair) for d, pair in DIFFERENCES.items() if d in shown}
+    for path in ("plots/height_error_mm", "plots/model_error_mn"):  # in millimetres, millinewtons
+        view = next(v for v in views if v.origin == path)
+        assert view.y_range is not None and len(labelled_ticks(*view.y_range)) >= 3, view
+    for view in views:
+        series = _view_series(recording, view, paths)
+        y_range = shown_range([v for _, v in series.values()], view.y_range)
+        ticks = labelled_ticks(*y_range)
+        assert len(ticks) >= 3, f"{view.name}: {y_range} labels only {ticks}"
+        keys = sorted(series)
+        for i, a in enumerate(keys):
+            for b in keys[i + 1 :]:
+                together = share_on_top(series[a], series[b], y_range)
+                if together > 0.5:
+                    assert frozenset((a, b)) in told_apart, f"{view.name}: {a} on {b}"
+    # the hold is read to the millimetre: a tick a millimetre apart or finer
+    hold = next(v for v in views if v.origin == "plots/height_error_mm")
+    ticks = labelled_ticks(*hold.y_range)
+    assert ticks[1] - ticks[0] <= 1.0 + 1e-9
 
 
 def test_the_report_says_what_the_learner_did_and_why_it_published_little():
@@ -407,3 +495,44 @@ def test_the_report_says_what_the_learner_did_and_why_it_published_little():
     )
     texts = " ".join(x["text"] for x in (*a.values(), *offline.values()))
     assert "nan" not in texts and "ESC" in offline["rotors"]["text"]
+
+
+def test_the_web_viewer_shows_the_hold_and_the_model_error_without_a_click(flown):
+    """Debian's Chromium, headless with software WebGL, on `groundfx review REC --web`: once
+    the flight has loaded, the height error and the model error are drawn across the upper
+    right of the page, one above the other, with no click."""
+    from autopilot.recording.series_style import HOLD_COLOR, MODEL_ERROR_COLOR
+    from tests.chromium import Chromium, find_chromium
+    from tests.viewer_checks import drawn
+
+    binary = find_chromium()
+    if binary is None:
+        pytest.skip("no Chromium to drive (Debian: apt-get install chromium)")
+    web, grpc = _free_port(), _free_port()
+    review = _serve_web(flown[0]["recording"], web, grpc)
+    width, height = 1600, 1000
+    upper_right = (width // 2, 0, width, int(height * 0.6))
+    seen: dict[str, dict] = {}
+
+    def both_drawn() -> bool:
+        image = np.asarray(browser.screenshot(box=upper_right))  # the part to look at only
+        whole = (0, 0, image.shape[1], image.shape[0])
+        seen["hold"] = drawn(image, HOLD_COLOR, whole)
+        seen["model"] = drawn(image, MODEL_ERROR_COLOR, whole)
+        # across the page's right half: the flight's whole time span (the hold's line leaves
+        # its view during the take-off, a metre off its setpoint)
+        return all(s["extent"] > 0.6 for s in seen.values())
+
+    try:
+        _wait_for_page(web, review)
+        with Chromium(binary, width, height) as browser:
+            browser.open(
+                f"http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc}%2Fproxy"
+            )
+            try:
+                wait_for(both_drawn, "the hold and the model error drawn", review, 240)
+            except AssertionError as err:
+                raise AssertionError(f"{err}; last seen: {seen}") from None
+    finally:
+        _stop_review(review)
+    assert seen["hold"]["row"] < seen["model"]["row"]  # the hold above the model's error

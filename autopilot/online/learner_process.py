@@ -12,9 +12,9 @@ the learner's bursts.
 
 Protocol over one duplex pipe (pickled tuples). Parent to learner: ("samples", rows),
 ("reset", t_s), ("configure", settings), ("close",). Learner to parent: ("ready",),
-("snapshot", version, weights, biases, t_s, loss), ("rejected", t_s, loss), ("reset",
-version, t_s), ("error", text) and, last, ("summary", counts, reject_reasons, last_loss,
-held_evidence).
+("snapshot", version, weights, biases, t_s, loss, basis, verdict), ("rejected", t_s, loss,
+verdict), ("reset", version, t_s), ("error", text) and, last, ("summary", counts,
+reject_reasons, last_loss, held_evidence).
 A row is t, the 12 features, the 3 targets, the position loop's vertical composite error
 (`composite`'s tracking term). The count of samples taken off the pipe is a
 shared integer (`taken`), which the loop's side reads to bound the queue without a message
@@ -53,7 +53,7 @@ def learner_main(
         return
     if session.snapshot.version > 0:  # composite starts on its home ground: publish it
         net = session.snapshot.net
-        conn.send(("snapshot", 1, net.weights, net.biases, 0.0, None, net.header.get("basis")))
+        conn.send(("snapshot", 1, net.weights, net.biases, 0.0, None, net.header.get("basis"), ""))
     conn.send(("ready",))
     while True:
         try:
@@ -70,9 +70,9 @@ def learner_main(
                 rows[:, ROW_TIME],
                 rows[:, ROW_TRACKING],
             )
-            for t_s, snapshot, loss in events:
+            for t_s, snapshot, loss, verdict in events:
                 if snapshot is None:
-                    conn.send(("rejected", t_s, loss))
+                    conn.send(("rejected", t_s, loss, verdict))
                 else:
                     net = snapshot.net
                     basis = net.header.get("basis")  # composite: the grounds, for --save-model
@@ -85,6 +85,7 @@ def learner_main(
                             t_s,
                             snapshot.loss,
                             basis,
+                            verdict,
                         )
                     )
         elif kind == "reset":

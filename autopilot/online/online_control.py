@@ -26,7 +26,8 @@ from simbridge.config import ConfigError
 # torch, and the learner with it, load only when learning is on: a flight without learning
 # connects to the simulator without waiting for them
 SAMPLE_HZ = 100.0  # thesis: samples at 100 Hz, an update per 64 (about 1.6 per second)
-Report = Callable[[float, float | None, int], None]  # (sim time, loss, version)
+# (sim time, loss, version, the update's verdict, the ground in use): as online_learner.Report
+Report = Callable[[float, float | None, int, str, str | None], None]
 
 _NAMES = list(COLUMNS)
 FEATURE_COLUMNS = np.array([_NAMES.index(f) for f in FEATURES])
@@ -37,7 +38,7 @@ TARGET_COLUMNS = np.array([_NAMES.index(t) for t in TARGETS])
 class OnlineOptions:
     deterministic: bool = True  # updates inside the control step: same sim times every run
     save_path: Path | None = None  # the adapted model at the end of the flight
-    on_report: Report | None = None  # (sim time, loss, version) per update: the recorder
+    on_report: Report | None = None  # per update: the recorder
 
 
 def find_memory(network: str | Path | None, rho: float) -> Memory | None:

@@ -44,7 +44,8 @@ from learner.online.snapshot import Snapshot, make_snapshot
 QUEUE_SIZE = 512  # samples: 5 s of slack before dropping
 CHUNK_SAMPLES = 16  # one message per 0.16 s of samples: the pipe, not the loop, carries them
 READY_TIMEOUT_S = 60.0  # the learner process imports torch: about 2 s, far more under load
-Report = Callable[[float, float | None, int], None]  # (sim time, loss, version)
+# (sim time, loss, version, what became of the update in words, the ground in use or None)
+Report = Callable[[float, float | None, int, str, str | None], None]
 # the learner's last word: counts, reject reasons, last loss, why updates were held
 Final = tuple[dict[str, int], dict[str, int], float | None, dict[str, float] | None]
 
@@ -144,7 +145,7 @@ class OnlineLearner:
     def reset(self, t_s: float) -> None:
         """Back to the offline weights."""
         if self.session is not None:
-            self._publish(self.session.reset(t_s))
+            self._publish(self.session.reset(t_s), "reset")
         else:
             self._command("reset", t_s)
 
@@ -188,18 +189,17 @@ class OnlineLearner:
                 return
             kind = message[0]
             if kind == "snapshot":
-                _, version, weights, biases, t_s, loss, basis = message
+                _, version, weights, biases, t_s, loss, basis, verdict = message
                 header = adapted_header(self.base.header, self.settings, version, {})
                 if basis is not None:
                     header["basis"] = basis
-                self._publish(
-                    make_snapshot(version, weights, biases, self.base.normaliser, header, t_s, loss)
-                )
+                normaliser = self.base.normaliser
+                snapshot = make_snapshot(version, weights, biases, normaliser, header, t_s, loss)
+                self._publish(snapshot, verdict)
             elif kind == "rejected":
-                if self.on_report is not None:
-                    self.on_report(message[1], message[2], self.snapshot.version)
+                self._report(message[1], message[2], message[3])
             elif kind == "reset":
-                self._publish(Snapshot(message[1], self.offline, message[2]))
+                self._publish(Snapshot(message[1], self.offline, message[2]), "reset")
             elif kind == "error":
                 self.errors.append(message[1])
             elif kind == "ready":
@@ -218,16 +218,22 @@ class OnlineLearner:
         updates = self.session.counts["updates"]
         snapshot = self.session.add(features, target_n, t_s, tracking_m_s)
         if snapshot is not None:
-            self._publish(snapshot)
-        elif self.session.counts["updates"] != updates and self.on_report is not None:
-            self.on_report(t_s, self.session.last_loss, self.snapshot.version)  # rejected
+            self._publish(snapshot, self.session.last_verdict)
+        elif self.session.counts["updates"] != updates:  # rejected, or held back
+            self._report(t_s, self.session.last_loss, self.session.last_verdict)
 
-    def _publish(self, snapshot: Snapshot) -> None:
+    def _publish(self, snapshot: Snapshot, verdict: str = "") -> None:
         self.snapshot = snapshot  # one reference assignment: the atomic swap
         if snapshot.loss is not None:
             self.losses.append((snapshot.t_s, snapshot.loss, snapshot.version))
+        self._report(snapshot.t_s, snapshot.loss, verdict)
+
+    def _report(self, t_s: float, loss: float | None, verdict: str) -> None:
+        """The update's loss and verdict, the version and ground now in use, to the recorder."""
         if self.on_report is not None:
-            self.on_report(snapshot.t_s, snapshot.loss, snapshot.version)
+            basis = self.snapshot.net.header.get("basis") or {}
+            ground = basis.get("current", basis.get("home"))
+            self.on_report(t_s, loss, self.snapshot.version, verdict, ground)
 
     # --- the end of the flight -------------------------------------------------------------
 

@@ -19,9 +19,11 @@ import rerun as rr
 
 from autopilot.commander.mission_items import PlanStep
 from autopilot.control.controller import ControlOutput
-from autopilot.recording.blueprint import default_blueprint, z_range_m
+from autopilot.recording.blueprint import DEFAULT_Z_RANGE_M, default_blueprint, z_range_m
+from autopilot.recording.compact import compact_recording
 from autopilot.recording.record_options import FLUSH_WALL_S, RecordOptions
 from autopilot.recording.recorder_rows import RowSender, scalars_key
+from autopilot.recording.review import review_text
 from autopilot.recording.rrbatch import ColumnBatch
 from autopilot.recording.scene import (
     log_drone,
@@ -40,9 +42,12 @@ from learner.flightlogs.recording import (
     GE_PREDICTED_ARROW,
     GE_TRUE_ARROW,
     LAYOUT_VERSION,
+    LEARNER_UPDATES,
     MAVLINK,
     META,
+    MODEL_STATE,
     PHASE_STATE,
+    REVIEW,
     SERIES,
     SUMMARY,
     TIMELINE,
@@ -88,10 +93,15 @@ class FlightRecorder:
         rec.set_log_time_enabled(False)  # sim_time only: the same flight, the same data
         rec.send_recording_name(self.path.stem)
         self._rec = rec
-        self._sender = RowSender(rec)
+        hold = self._modes.index("holding") if "holding" in self._modes else -1
+        self._sender = RowSender(rec, float(hold))
+        self._focus_m: Vec3 = (0.0, 0.0, 0.0)  # where the 3-D view looks: the landing point
+        self._z_view_m = DEFAULT_Z_RANGE_M
         self._rows: list[tuple[float, ...]] = []
         self._events: list[tuple[float, str, str]] = []
-        self._learner: list[tuple[float, float, float]] = []
+        # the learner's reports: (time, loss, version, what became of the update, ground)
+        self._learner: list[tuple[float, float, float, str, str]] = []
+        self._model_state = ""
         self._learner_lock = threading.Lock()  # the online learner reports from its thread
         self._estimator: list[tuple[float, float, float, float]] = []
         self._ratios: dict[str, list[tuple[float, float]]] = {}
@@ -189,14 +199,25 @@ class FlightRecorder:
         TRACE, DEBUG, INFO, WARN, ERROR, CRITICAL. At the last step's time by default."""
         self._events.append((self._last_t if t_s is None else t_s, level, text))
 
-    def learner(self, t_s: float, loss: float | None = None, version: int | None = None) -> None:
-        """The online learner's loss and the weight-snapshot version now in use (thread-safe)."""
+    def learner(
+        self,
+        t_s: float,
+        loss: float | None = None,
+        version: int | None = None,
+        note: str = "",
+        ground: str | None = None,
+    ) -> None:
+        """The online learner's loss, the weight-snapshot version now in use, what became of
+        the update (`note`: "accepted", "rejected: <why>", ...) and the ground it models
+        (composite) (thread-safe)."""
         with self._learner_lock:
             self._learner.append(
                 (
                     t_s,
                     math.nan if loss is None else loss,
                     math.nan if version is None else float(version),
+                    note,
+                    ground or "",
                 )
             )
 
@@ -234,12 +255,18 @@ class FlightRecorder:
         if summary is not None:
             text = json.dumps(summary, indent=1, default=str)
             self._rec.log(SUMMARY, rr.TextDocument(text, media_type="text/plain"), static=True)
+        review = review_text(summary, self._info, ended)
+        self._rec.log(REVIEW, rr.TextDocument(review, media_type="text/markdown"), static=True)
         level = "INFO" if ended == "landed" else "WARN"
         self._events.append((self._last_t, level, f"flight ended: {ended}"))
         self.flush()
         self._rec.flush()
         self._rec.disconnect()  # closes the file sink: writes the footer
         self._background_s = time.process_time() - time.thread_time() - self._cpu0
+        # the file again in large chunks, with the layout's review views scaled to the flight
+        ranges = self._sender.spread.ranges()
+        blueprint = default_blueprint(self._focus_m, self._z_view_m, self._learning, ranges)
+        compact_recording(self.path, blueprint)
 
     def stats(self) -> dict[str, float]:
         """Recording's cost per control step, in microseconds: in the loop (`step`, flushes
@@ -267,7 +294,8 @@ class FlightRecorder:
         with self._learner_lock:
             learned, self._learner = self._learner, []
         if learned:
-            a = np.asarray(learned, dtype=float)
+            self._send_learner_notes(learned)
+            a = np.asarray([row[:3] for row in learned], dtype=float)
             for col, path in ((1, "plots/learner/loss"), (2, "plots/learner/version")):
                 keep = ~np.isnan(a[:, col])
                 if keep.any():
@@ -275,7 +303,9 @@ class FlightRecorder:
             # rerun's axes are linear: a loss spanning decades reads as zero but for its peaks
             keep = a[:, 1] > 0.0
             if keep.any():
-                self._scalars("plots/learner/log10_loss", a[keep, 0], np.log10(a[keep, 1]))
+                log10_loss = np.log10(a[keep, 1])
+                self._scalars("plots/learner/log10_loss", a[keep, 0], log10_loss)
+                self._sender.spread.add("plots/learner/log10_loss", log10_loss)
         if self._estimator:
             a, self._estimator = np.asarray(self._estimator, dtype=float), []
             for col, name in enumerate(ESTIMATOR_ERRORS, start=1):
@@ -296,6 +326,38 @@ class FlightRecorder:
                 batch.send(self._rec, now_ns, {scalars_key(f"{MAVLINK}/{link}"): counts})
         self._next_flush_s = self._last_t + self._every_s
         self._flush_deadline = time.perf_counter() + FLUSH_WALL_S
+
+    def _send_learner_notes(self, learned: list[tuple[float, float, float, str, str]]) -> None:
+        """Each update's fate in the learner's log (with its loss and the weights then in
+        use); the model in use as a named state: the offline weights, adapted (to which
+        ground, for `composite`), or reset."""
+        notes = [
+            (t, note + ("" if math.isnan(loss) else f" (loss {loss:.3g}, weights v{version:.0f})"))
+            for t, loss, version, note, _ in learned
+            if note
+        ]
+        if notes:
+            self._send(
+                LEARNER_UPDATES,
+                np.array([t for t, _ in notes]),
+                rr.TextLog.columns(
+                    text=[n for _, n in notes],
+                    level=["INFO" if n.startswith("accepted") else "WARN" for _, n in notes],
+                ),
+            )
+        model = str(self._info.get("model") or "model")
+        for t, _, version, note, ground in learned:
+            if math.isnan(version):
+                continue
+            if not self._learning:
+                state = model
+            elif version == 0 or note == "reset":
+                state = f"{model}, offline weights" + (" (reset)" if note == "reset" else "")
+            else:
+                state = f"{model}, adapted online" + (f" to ground {ground}" if ground else "")
+            if state != self._model_state:
+                self._model_state = state
+                self._state_changed(t, MODEL_STATE, state)
 
     def _send(self, path: str, t_s: np.ndarray, columns: Any) -> None:
         rr.send_columns(path, indexes=[_duration(t_s)], columns=columns, recording=self._rec)
@@ -343,8 +405,14 @@ class FlightRecorder:
         self._rec.set_time(TIMELINE, duration=np.timedelta64(round(t_s * 1e9), "ns"))
         log_mission(self._rec, points, labels, path)
         if points:
-            blueprint = default_blueprint(path[-1], z_range_m(path), self._learning)
-            self._rec.send_blueprint(blueprint, make_active=False)
+            self._focus_m, self._z_view_m = path[-1], z_range_m(path)
+            self._send_blueprint()
+
+    def _send_blueprint(self) -> None:
+        """The default layout, looking at the landing point (until the flight's end scales
+        its review views: `close`)."""
+        blueprint = default_blueprint(self._focus_m, self._z_view_m, self._learning)
+        self._rec.send_blueprint(blueprint, make_active=False)
 
     def _state_changed(self, t_s: float, path: str, state: str) -> None:
         self._rec.set_time(TIMELINE, duration=np.timedelta64(round(t_s * 1e9), "ns"))

@@ -48,7 +48,12 @@ class Recorder(Protocol):
     ) -> None: ...
     def event(self, text: str, level: str = "INFO", t_s: float | None = None) -> None: ...
     def learner(
-        self, t_s: float, loss: float | None = None, version: int | None = None
+        self,
+        t_s: float,
+        loss: float | None = None,
+        version: int | None = None,
+        note: str = "",
+        ground: str | None = None,
     ) -> None: ...
     def estimator(
         self, t_s: float, errors: Sequence[float], test_ratios: dict[str, float]
@@ -70,7 +75,14 @@ class NullRecorder:
     def event(self, text: str, level: str = "INFO", t_s: float | None = None) -> None:
         pass
 
-    def learner(self, t_s: float, loss: float | None = None, version: int | None = None) -> None:
+    def learner(
+        self,
+        t_s: float,
+        loss: float | None = None,
+        version: int | None = None,
+        note: str = "",
+        ground: str | None = None,
+    ) -> None:
         pass
 
     def estimator(self, t_s: float, errors: Sequence[float], test_ratios: dict[str, float]) -> None:

@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from autopilot.metrics import NEAR_GROUND_M
+from autopilot.recording.review import ReviewSpread
 from autopilot.recording.rrbatch import ColumnBatch
 from autopilot.recording.trail import Trail, firsts
 from learner.flightlogs.recording import (
@@ -50,10 +52,12 @@ TRAIL_SEGMENT_S = 10.0  # world/trajectory/0 covers 0-10 s of flight, /1 10-20 s
 TRAIL_RGBA = 0x17BECFFF  # teal, opaque, against the light ground (rerun packs 0xRRGGBBAA)
 
 # The series logged at every step (the rest: truth, ESC telemetry, learner reports).
+TRUTH_SERIES = (*(f"plots/ground_effect/{axis}/true" for axis in "xyz"), "plots/model_error_mn")
+ESC_SERIES = ("plots/rotors/actual", *(f"plots/rotors/difference/{i}" for i in range(4)))
 STEP_SERIES = tuple(
     p
     for p in SERIES
-    if not p.startswith("plots/learner/") and not p.endswith("/true") and p != "plots/rotors/actual"
+    if not p.startswith("plots/learner/") and p not in TRUTH_SERIES and p not in ESC_SERIES
 )
 
 
@@ -77,16 +81,19 @@ def world_acceleration(q: np.ndarray, specific_force_frd: np.ndarray) -> np.ndar
 
 
 class RowSender:
-    def __init__(self, rec: rr.RecordingStream) -> None:
+    def __init__(self, rec: rr.RecordingStream, hold_mode: float = -1.0) -> None:
         self._rec = rec
         self._step = ColumnBatch(TIMELINE)
         for path in STEP_SERIES:
             self._step.add(path, _scalars(len(SERIES[path])))
         self._truth = ColumnBatch(TIMELINE)
-        for axis in "xyz":
-            self._truth.add(f"plots/ground_effect/{axis}/true", _scalars(1))
+        for path in TRUTH_SERIES:
+            self._truth.add(path, _scalars(1))
         self._esc = ColumnBatch(TIMELINE)
-        self._esc.add("plots/rotors/actual", _scalars(4))
+        for path in ESC_SERIES:
+            self._esc.add(path, _scalars(len(SERIES[path])))
+        self._hold_mode = hold_mode  # the `holding` phase's index in the rows' mode column
+        self.spread = ReviewSpread()
         self._scene = ColumnBatch(TIMELINE)
         zero = np.zeros((1, 3))
         self._scene.add(DRONE, rr.Transform3D.columns(translation=zero, quaternion=[[0, 0, 0, 1]]))
@@ -109,6 +116,7 @@ class RowSender:
         roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
         pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
         attitude_error = a[:, r.DES : r.DES + 2] - np.column_stack((roll, pitch))
+        height_error_mm = (p[:, 2] - sp[:, 2]) * 1e3
         values = {
             scalars_key("plots/position"): p,
             scalars_key("plots/velocity"): v,
@@ -123,23 +131,36 @@ class RowSender:
             scalars_key("plots/attitude"): q,
             scalars_key("plots/rates"): a[:, r.RATES : r.RATES + 3],
             scalars_key("plots/acceleration"): world_acceleration(q, a[:, r.ACC : r.ACC + 3]),
+            scalars_key("plots/height_error_mm"): height_error_mm,
         }
         for i, axis in enumerate("xyz"):
             values[scalars_key(f"plots/ground_effect/{axis}/predicted")] = ge[:, i]
         self._step.send(self._rec, time_ns, values)
         has_truth = ~np.isnan(true_ge[:, 0])
+        model_error_mn = (ge[:, 2] - true_ge[:, 2]) * 1e3
         if has_truth.any():
             values = {
                 scalars_key(f"plots/ground_effect/{axis}/true"): true_ge[has_truth, i]
                 for i, axis in enumerate("xyz")
             }
+            values[scalars_key("plots/model_error_mn")] = model_error_mn[has_truth]
             self._truth.send(self._rec, time_ns[has_truth], values)
         has_esc = ~np.isnan(a[:, r.ACT])
+        difference = None
         if has_esc.any():
             actual = a[has_esc, r.ACT : r.ACT + 4] / RAD_S_TO_RPM
-            self._esc.send(
-                self._rec, time_ns[has_esc], {scalars_key("plots/rotors/actual"): actual}
-            )
+            difference = a[has_esc, r.N : r.N + 4] - actual
+            values = {scalars_key("plots/rotors/actual"): actual}
+            for i in range(4):
+                values[scalars_key(f"plots/rotors/difference/{i}")] = difference[:, i]
+            self._esc.send(self._rec, time_ns[has_esc], values)
+        # near the ground: a hold whose setpoint is at most NEAR_GROUND_M above the surface
+        hold = (a[:, r.MODE] == self._hold_mode) & (sp[:, 2] - p[:, 2] + a[:, r.H] <= NEAR_GROUND_M)
+        self.spread.add("plots/height_error_mm", height_error_mm, hold)
+        self.spread.add("plots/model_error_mn", np.where(has_truth, model_error_mn, np.nan), hold)
+        self.spread.add("plots/ground_effect/z/true", true_ge[:, 2])
+        if difference is not None:
+            self.spread.add("plots/rotors/difference", difference)
         self._send_scene(t, time_ns, p, q, ge, true_ge)
         self._send_trail(t, p)
 

@@ -17,6 +17,8 @@ ROTOR_ACTUAL_COLORS: tuple[Rgb, ...] = tuple(
     (min(255, r + 90), min(255, g + 90), min(255, b + 90)) for r, g, b in ROTOR_COLORS
 )
 XYZ = (RED, GREEN, BLUE)
+HOLD_COLOR: Rgb = (31, 119, 180)  # the height error near the ground
+MODEL_ERROR_COLOR: Rgb = (148, 103, 189)  # the ground-effect model's error
 LINK_COLORS: dict[str, tuple[Rgb, ...]] = {  # received, dropped, rejected
     "sim": ((31, 119, 180), (120, 170, 220), (10, 60, 110)),
     "gcs": ((255, 127, 14), (250, 180, 110), (170, 80, 0)),
@@ -31,6 +33,14 @@ STYLES: dict[str, tuple[tuple[str, ...], tuple[Rgb, ...]]] = {
     "plots/learner/loss": (("loss (standardised)",), (RED,)),
     "plots/learner/log10_loss": (("log10 of the loss (standardised)",), (RED,)),
     "plots/learner/version": (("weights version",), (BLUE,)),
+    # the review's differences: colours no other view of the review uses, so that a
+    # screenshot tells the views apart
+    "plots/height_error_mm": (("z - setpoint (mm)",), (HOLD_COLOR,)),
+    "plots/model_error_mn": (("predicted - true (mN)",), (MODEL_ERROR_COLOR,)),
+    **{
+        f"plots/rotors/difference/{i}": ((f"n{i} commanded - measured (rad/s)",), (color,))
+        for i, color in enumerate(ROTOR_COLORS)
+    },
     **{
         f"plots/ground_effect/{axis}/{kind}": ((kind,), (GE_COLORS[kind],))
         for axis in "xyz"

@@ -71,6 +71,25 @@ SERIES: dict[str, tuple[str, ...]] = {
     "plots/learner/loss": ("loss",),  # online learner's loss (standardised units)
     "plots/learner/log10_loss": ("log10 loss",),  # the same on a log scale, for the viewer
     "plots/learner/version": ("version",),  # weight-snapshot version the controller uses
+    # the review's differences, for the viewer: two series that lie on top of each other
+    # read as one, their difference reads at its own scale
+    "plots/height_error_mm": ("z - setpoint",),  # mm, every step with a setpoint
+    "plots/model_error_mn": ("predicted - true",),  # mN, vertical ground effect, with the truth
+    **{  # rad/s, commanded minus measured (ESC), when the telemetry arrives
+        f"plots/rotors/difference/{i}": (f"n{i} commanded - measured",) for i in range(4)
+    },
+}
+# The difference series and the two series each is the difference of: (path, column) pairs.
+DIFFERENCES: dict[str, tuple[tuple[str, int], tuple[str, int]]] = {
+    "plots/height_error_mm": (("plots/z", 0), ("plots/z", 1)),
+    "plots/model_error_mn": (
+        ("plots/ground_effect/z/predicted", 0),
+        ("plots/ground_effect/z/true", 0),
+    ),
+    **{
+        f"plots/rotors/difference/{i}": (("plots/rotors/commanded", i), ("plots/rotors/actual", i))
+        for i in range(4)
+    },
 }
 COUNTERS = ("received", "dropped", "rejected")  # MAVLink counters per link, cumulative
 MAVLINK = "plots/mavlink"  # one entity per link: plots/mavlink/<link> with COUNTERS
@@ -78,6 +97,9 @@ EVENTS = "events"  # TextLog: modes, arming, failsafes, link events, the end of 
 STATES = "states"  # StateChange, named states as they change: STATES/phase, STATES/flight_mode
 PHASE_STATE = f"{STATES}/phase"
 FLIGHT_MODE_STATE = f"{STATES}/flight_mode"
+MODEL_STATE = f"{STATES}/model"  # the ground-effect model in use: its name, version, ground
+LEARNER_UPDATES = "learner/updates"  # TextLog: each online update, accepted or not, and why
+REVIEW = "review"  # static TextDocument: the landing and the learner in a sentence each
 META = "meta"  # static TextDocument: JSON with the flight's configuration and mode names
 SUMMARY = "summary"  # static TextDocument: JSON, the flight's summary (figures, how it ended)
 
@@ -100,6 +122,7 @@ ENTITY_PATHS: tuple[str, ...] = (
     EVENTS,
     PHASE_STATE,
     FLIGHT_MODE_STATE,
+    MODEL_STATE,
     META,
 )
 

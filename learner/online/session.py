@@ -65,6 +65,8 @@ class OnlineSession:
         self._s: list[float] = []  # the tracking error of each sample (composite)
         self._composite: CompositeState | None = None
         self.last_decision = ""
+        # what became of the last update, in words: "accepted", "rejected: <why>", "held: ..."
+        self.last_verdict = ""
         self._holdout: collections.deque[tuple[np.ndarray, np.ndarray]] = collections.deque(
             maxlen=settings.holdout_size
         )
@@ -144,20 +146,20 @@ class OnlineSession:
         targets_n: np.ndarray,
         times_s: np.ndarray,
         tracking_m_s: np.ndarray | None = None,
-    ) -> list[tuple[float, Snapshot | None, float | None]]:
+    ) -> list[tuple[float, Snapshot | None, float | None, str]]:
         """Samples in a block (rows as `add` takes them), with the same result as adding
         them one by one; for every update they triggered: (time, the new snapshot or None
-        if the guards rejected it, the batch's loss before the update)."""
+        if the guards rejected it, the batch's loss before the update, its verdict)."""
         good = inliers(features, targets_n)
         self.counts["outliers"] += int(np.count_nonzero(~good))
         xs, ys = self._standardise(features[good], targets_n[good])
         track = np.zeros(len(times_s)) if tracking_m_s is None else tracking_m_s
-        events: list[tuple[float, Snapshot | None, float | None]] = []
+        events: list[tuple[float, Snapshot | None, float | None, str]] = []
         for x, y, t_s, s_m_s in zip(xs, ys, times_s[good], track[good], strict=True):
             updates = self.counts["updates"]
             snapshot = self._take(x, y, float(t_s), float(s_m_s))
             if self.counts["updates"] != updates:
-                events.append((float(t_s), snapshot, self.last_loss))
+                events.append((float(t_s), snapshot, self.last_loss, self.last_verdict))
         return events
 
     def _take(
@@ -206,8 +208,13 @@ class OnlineSession:
         self.counts[decision.kind] += 1
         if decision.kind == "held":
             self.held_statistics.append(float(decision.statistic))
+            self.last_verdict = (
+                f"held: likelihood ratio {decision.statistic:.3g} under the confidence "
+                f"threshold {self._composite_config.confidence:g}"
+            )
             return None
         self.counts["accepted"] += 1
+        self.last_verdict = f"accepted ({decision.kind})"
         return self._publish_composite(t_s, self.last_loss)
 
     def held_evidence(self) -> dict[str, float] | None:
@@ -259,6 +266,7 @@ class OnlineSession:
             return self._reject(verdict.reason)
         self._rls = result.rls
         self.counts["accepted"] += 1
+        self.last_verdict = "accepted"
         self.snapshot = make_snapshot(
             s.version + 1,
             result.weights,
@@ -272,6 +280,7 @@ class OnlineSession:
 
     def _reject(self, reason: str) -> None:
         self.counts["rejected"] += 1
+        self.last_verdict = f"rejected: {reason}"
         # the kind of reason, without its numbers, so that counts add up
         self.reject_reasons[reason.split(" ")[0] + (" RMSE" if "RMSE" in reason else "")] += 1
         return None
