@@ -92,8 +92,13 @@ def ray_init(address: str, workers: int | None = None) -> None:
         ) from None
     if ray.is_initialized():
         return
-    if address == "local":
-        ray.init(num_cpus=workers or os.cpu_count(), include_dashboard=False, log_to_driver=False)
+    if address == "local":  # a new instance here, even where `ray start` left one running
+        ray.init(
+            address="local",
+            num_cpus=workers or os.cpu_count(),
+            include_dashboard=False,
+            log_to_driver=False,
+        )
     else:
         ray.init(address=address, log_to_driver=False)
 
