@@ -34,7 +34,6 @@ from __future__ import annotations
 import math
 import tempfile
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -181,6 +180,7 @@ def run_online_eval(
     workers: int = 1,
     controller: str = "thesis",
     basis: str = BASIS_NETWORK,
+    ray_address: str | None = None,
 ) -> dict[str, Any]:
     results: dict[str, Any] = {
         "seeds": seeds,
@@ -191,22 +191,13 @@ def run_online_eval(
     }
     extra = tuple(a for p in params for a in ("--param", p))
     control = tuple(a for p in CONTROLLERS[controller] for a in ("--param", p))
-    # each flight is its own simulator and autopilot processes: threads only wait on them
-    pool = ThreadPoolExecutor(max_workers=workers)
 
-    def errors_of(calls: Sequence[tuple[Any, ...]]) -> np.ndarray:
-        return np.array(list(pool.map(lambda c: hold_error(*c, *control), calls)))
-
-    def summaries_of(calls: Sequence[tuple[Any, ...]]) -> list[dict[str, Any]]:
-        return list(pool.map(lambda c: flight_summary(*c, *control), calls))
-
-    def logged_errors_of(calls: Sequence[tuple[tuple[Any, ...], Path]]) -> np.ndarray:
-        return np.array(
-            list(pool.map(lambda c: hold_error(*c[0], *control, flight_log=c[1]), calls))
-        )
-
-    with pool, tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
+        # every flight a task of the campaign runner (local processes, or Ray tasks)
+        flights = _Flights(d / "results.jsonl", control, workers, ray_address)
+        errors_of, summaries_of = flights.errors, flights.summaries
+        logged_errors_of = flights.logged_errors
         trials = [trial_file(d, seed, hold_s) for seed in seeds]
         adapted: dict[str, list[Path]] = {m: [] for m in methods}
         for rho in rhos:
@@ -257,6 +248,48 @@ def run_online_eval(
                 summaries_of,
             )
     return results
+
+
+def online_flight(
+    call: tuple[Any, ...], control: tuple[str, ...], flight_log: Path | None
+) -> dict[str, Any]:
+    """One flight of the evaluation (a task of the campaign runner): its summary."""
+    return flight_summary(*call, *control, flight_log=flight_log)
+
+
+class _Flights:
+    """The evaluation's batches of flights, each batch run side by side by the campaign
+    runner; a failed flight stops the evaluation with its reason."""
+
+    def __init__(
+        self, results: Path, control: tuple[str, ...], workers: int, ray_address: str | None
+    ) -> None:
+        self.results, self.control = results, control
+        self.workers, self.ray_address = workers, ray_address
+        self.count = 0
+
+    def run(self, calls: Sequence[tuple[tuple[Any, ...], Path | None]]) -> list[dict[str, Any]]:
+        from mission.campaigns.runner import Task, run_tasks
+
+        first = self.count
+        self.count += len(calls)
+        ids = [f"flight{first + k}" for k in range(len(calls))]
+        tasks = [Task(i, i, online_flight, (c, self.control, log))
+                 for i, (c, log) in zip(ids, calls, strict=True)]  # fmt: skip
+        records = run_tasks(tasks, self.results, self.workers, self.ray_address, False)
+        failed = [records[i] for i in ids if "error" in records[i]]
+        if failed:
+            raise RuntimeError(f"a flight of the evaluation failed: {failed[0]['error']}")
+        return [records[i] for i in ids]
+
+    def summaries(self, calls: Sequence[tuple[Any, ...]]) -> list[dict[str, Any]]:
+        return self.run([(c, None) for c in calls])
+
+    def errors(self, calls: Sequence[tuple[Any, ...]]) -> np.ndarray:
+        return np.array([_hold(x) for x in self.summaries(calls)])
+
+    def logged_errors(self, calls: Sequence[tuple[tuple[Any, ...], Path]]) -> np.ndarray:
+        return np.array([_hold(x) for x in self.run(list(calls))])
 
 
 def _remember(

@@ -60,9 +60,15 @@ def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) ->
         help="thesis: the thesis's position PD, where a model error shows in the hold "
         "(default); default: the autopilot's PD with its integral",
     )
-    e.add_argument(
+    where = e.add_mutually_exclusive_group()
+    where.add_argument(
         "--workers", type=int, default=None, help="flights at once (default: one per core)"
     )
+    where.add_argument(
+        "--ray", metavar="ADDRESS",
+        help="run the flights as tasks on a Ray cluster (auto, HOST:PORT, ray://HOST:PORT; "
+        "local: start one here); needs the ray extra",
+    )  # fmt: skip
     e.add_argument(
         "--param", action="append", default=[], metavar="NAME=VALUE", help="e.g. GFX_OL_LR=0.01"
     )
@@ -116,6 +122,7 @@ def cmd_online_learn(args: argparse.Namespace) -> int:
         workers=workers,
         controller=args.controller,
         basis=args.basis,
+        ray_address=args.ray,
     )
     if args.json:
         print(json.dumps(result))
