@@ -263,6 +263,11 @@ def test_a_two_node_ray_cluster_gives_the_local_results_of_a_bench_and_a_gather(
     remote = run_bench([case], tmp_path / "cluster", ray_address=ray_cluster)["cases"][0]
     gathered = gather_flights(2.0, 300, 3, tmp_path / "cluster.npz", flights=2,
                               ray_address=ray_cluster, progress=False)  # fmt: skip
+    # the tasks ran in private folders; their flights and reports were written here
+    folder = tmp_path / "cluster" / case.name
+    assert sorted(folder.glob("flight*.csv")) and (folder / "diagnosis" / "gap.json").exists()
+    assert sorted(p.name for p in (tmp_path / "cluster.parts").glob("*.npz")) == [
+        "flight0.npz", "flight1.npz"]  # fmt: skip
     # here: the bench's flights are the cluster's (cached), its diagnosis runs again
     shutil.copytree(tmp_path / "cluster", tmp_path / "local")
     (tmp_path / "local" / RESULTS_FILE).unlink()

@@ -159,8 +159,11 @@ def run_bench(
 
     source = source_fingerprint()
     tasks = [
-        Task(case.name, _key(case, replay, source), run_case, (case, out, replay)) for case in cases
-    ]
+        # its folder (flights already flown in it are reused) goes with it and comes back
+        Task(case.name, _key(case, replay, source), run_case, (case, out, replay),
+             outputs=(out / case.name,), input_folders=(out / case.name,))
+        for case in cases
+    ]  # fmt: skip
 
     def say(record: dict[str, Any]) -> None:
         tqdm.write(f"gap bench: {record['id']}: {_line(record)}")

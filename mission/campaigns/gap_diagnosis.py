@@ -243,7 +243,7 @@ def replay_missions(
         for label, world in (("nominal", nominal), ("corrected", corrected)):
             name = f"{log.name}-{label}-{keys[world]}.csv"
             args = (str(mission), str(world), str(out / name), replay_limit_s(log))
-            tasks.append(Task(f"{log.name}/{label}", name, replay_flight, args))
+            tasks.append(Task(f"{log.name}/{label}", name, replay_flight, args, (out / name,)))
     records = run_tasks(tasks, out / "results.jsonl", workers, ray_address, False, "replay")
     before, after = [], []
     for log, _ in missions:

@@ -132,7 +132,7 @@ def gather_flights(
         key = hashlib.sha256(repr((rho, share, flight_seed, world_text, source)).encode())
         path = parts / f"flight{i}.npz"
         tasks.append(Task(f"flight{i}", key.hexdigest()[:16], gather_flight,
-                          (rho, share, flight_seed, path, world)))  # fmt: skip
+                          (rho, share, flight_seed, path, world), outputs=(path,)))  # fmt: skip
     records = run_tasks(
         tasks, parts / "results.jsonl", workers, ray_address, progress, f"gather rho={rho:g}"
     )

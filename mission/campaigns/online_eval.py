@@ -274,7 +274,8 @@ class _Flights:
         first = self.count
         self.count += len(calls)
         ids = [f"flight{first + k}" for k in range(len(calls))]
-        tasks = [Task(i, i, online_flight, (c, self.control, log))
+        # the evaluation's folder: its flights' logs and saved models come back to it
+        tasks = [Task(i, i, online_flight, (c, self.control, log), (self.results.parent,))
                  for i, (c, log) in zip(ids, calls, strict=True)]  # fmt: skip
         records = run_tasks(tasks, self.results, self.workers, self.ray_address, False)
         failed = [records[i] for i in ids if "error" in records[i]]

@@ -6,7 +6,9 @@ resumes where it stopped, and a progress bar with its ETA.
 A task is a top-level function and its arguments, named by an id; its key is what decides its
 result (a changed definition is a new task, flown again). The same task gives the same
 result wherever it runs: the flights are lockstep and seeded. A task whose worker dies (a
-killed process, a lost node) is run again once, elsewhere.
+killed process, a lost node) is run again once, elsewhere. On a Ray cluster a task carries
+the files its arguments name, and what it writes under its outputs comes back and is written
+on the machine that started the campaign (`shipping`).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from mission.campaigns.shipping import input_files, land, run_carried
 from simbridge.config import ConfigError
 
 
@@ -33,6 +36,10 @@ class Task:
     key: str  # what decides the result: a task whose key changed is run again
     fn: Callable[..., dict[str, Any]]  # top level (a worker imports it by name)
     args: tuple[Any, ...] = ()
+    # where it runs on a cluster: the files and folders it writes (brought back to where the
+    # campaign started) and the folders it reads beyond the files its arguments name
+    outputs: tuple[str | Path, ...] = ()
+    input_folders: tuple[str | Path, ...] = ()
 
 
 PACKAGES = ("autopilot", "simbridge", "learner", "mission")
@@ -139,12 +146,20 @@ def _pool(tasks: list[Task], workers: int) -> Iterator[dict[str, Any]]:
                     future.cancel()
 
 
+def _run_carried(task: Task, files: dict[str, bytes]) -> dict[str, Any]:
+    return run_carried(_run, task, files)
+
+
 def _ray(tasks: list[Task]) -> Iterator[dict[str, Any]]:
     import ray
 
-    # one task per core, as the pool; a task whose worker or node dies is run again once
-    remote = ray.remote(num_cpus=1, max_retries=1)(_run)
-    pending = [remote.remote(t) for t in tasks]
+    # one task per core, as the pool; a task whose worker or node dies is run again once.
+    # Its files go with it and come back in its record: a cluster's machines share no disk.
+    remote = ray.remote(num_cpus=1, max_retries=1)(_run_carried)
+    pending = [
+        remote.remote(t, input_files(t.args, tuple(Path(f) for f in t.input_folders)))
+        for t in tasks
+    ]
     try:
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
@@ -184,6 +199,7 @@ def run_tasks(
     failed = 0
     try:
         for record in stream:
+            land(record)  # a Ray task's files, written here
             append_result(results_path, record)
             if "error" in record:
                 failed += 1

@@ -95,7 +95,8 @@ def run_trials(
     todo = [group[0] for group in sharing.values()]
     recordings = out / "recordings" if keep_recordings else None
     # a trial's id names its definition: it is its key too
-    tasks = [Task(t.id, t.id, fly_trial, (t, artefacts, recordings)) for t in todo]
+    outputs = (recordings,) if recordings is not None else ()
+    tasks = [Task(t.id, t.id, fly_trial, (t, artefacts, recordings), outputs) for t in todo]
 
     def shared_records(record: dict[str, Any]) -> None:
         """The flight's record for every trial that shares it (the first is the runner's)."""
