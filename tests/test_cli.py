@@ -106,5 +106,7 @@ def test_bench_campaign_prints_flights_per_minute_for_one_and_two_workers():
     result = run_groundfx("bench", "campaign", "--flights", "1", "--json")
     assert result.returncode == 0, result.stderr
     figures = json.loads(result.stdout.strip().splitlines()[-1])
-    assert figures["flights_per_min_1"] > 0 and figures["flights_per_min_2"] > 0
-    assert figures["speedup"] == figures["flights_per_min_2"] / figures["flights_per_min_1"]
+    rates = [figures[f"flights_per_min_{k}"] for k in ("1_on_1_core", "1", "2")]
+    assert all(r > 0 for r in rates)
+    assert figures["speedup"] == rates[2] / rates[1]
+    assert figures["speedup_per_core"] == rates[2] / rates[0]
