@@ -15,6 +15,8 @@ by `catalogue(vehicle)`, so that the same relative effect sits at the same place
 from __future__ import annotations
 
 import functools
+import weakref
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -120,23 +122,60 @@ def nominal_values(effects: EffectSet, vehicle: Vehicle | None = None) -> Values
     return out
 
 
+# A fit's numerical Jacobian moves one parameter at a time: the parts of the force that do
+# not depend on it are those of the call before. Each part is kept per flight under the
+# values it reads (a few of each: the point and its steps), and read-only.
+_PARTS: dict[int, dict[tuple, np.ndarray]] = {}
+_PARTS_PER_FLIGHT = 32
+ROTOR_PARAMETERS = ("thrust_mass", "thrust_curve", "motor_lag", "spin_down")
+
+
+def _part(
+    d: FlightData,
+    vehicle: Vehicle,
+    what: str,
+    names: tuple[str, ...],
+    values: Values,
+    compute: Callable[[], np.ndarray],
+) -> np.ndarray:
+    """`compute()`, or its earlier result for the same flight, vehicle and values of `names`."""
+    parts = _PARTS.get(id(d))
+    if parts is None:
+        parts = _PARTS[id(d)] = {}
+        weakref.finalize(d, _PARTS.pop, id(d), None)  # an id is reused once `d` is gone
+    key = (what, vehicle, *((n, np.asarray(values[n]).tobytes()) for n in names if n in values))
+    part = parts.get(key)
+    if part is None:
+        if len(parts) >= _PARTS_PER_FLIGHT:
+            del parts[next(iter(parts))]  # the oldest
+        part = parts[key] = compute()
+        part.flags.writeable = False
+    return part
+
+
 def world_force(values: Values, d: FlightData, vehicle: Vehicle) -> np.ndarray:
     """(N, 3) world-frame force besides gravity that makes m a of the log (see module doc)."""
-    f = rotor_forces_n(values, d, vehicle)
+    f = _part(d, vehicle, "rotors", ROTOR_PARAMETERS, values,
+              lambda: rotor_forces_n(values, d, vehicle))  # fmt: skip
     radius = vehicle.rotor_radius_m
     if "ceiling_effect" in values:
         p = CeilingEffectParams(rho=float(values["ceiling_effect"][0]))
-        f = f * (1.0 + thrust_gain_array(d.rotor_ceilings_m, p.rho, radius, p.cutoff_for(radius)))
+        f = f * (1.0 + _part(d, vehicle, "ceiling", ("ceiling_effect",), values,
+                             lambda: thrust_gain_array(d.rotor_ceilings_m, p.rho, radius,
+                                                       p.cutoff_for(radius))))  # fmt: skip
     thrust = f.sum(axis=1)
     force = _thrust_axis(values, d) * thrust[:, None]
     if "ground_effect" in values:
-        p = GroundEffectParams(rho=float(values["ground_effect"][0]))
-        gain = thrust_gain_array(d.rotor_heights_m, p.rho, radius, p.cutoff_for(radius))
+        g = GroundEffectParams(rho=float(values["ground_effect"][0]))
+        gain = _part(d, vehicle, "ground", ("ground_effect",), values,
+                     lambda: thrust_gain_array(d.rotor_heights_m, g.rho, radius,
+                                               g.cutoff_for(radius)))  # fmt: skip
         force[:, 2] += (f * gain).sum(axis=1)
     if "wall_effect" in values:
         wall = WallEffectParams(gain=float(values["wall_effect"][0]))
         force += wall_force_array(wall, thrust, radius, d.wall_distances_m)
-    force += _drag(values, d, vehicle)
+    force += _part(d, vehicle, "drag", ("rotor_drag", "body_drag", "wind"), values,
+                   lambda: _drag(values, d, vehicle))  # fmt: skip
     for name, c in registry.candidates().items():  # effects declared with a force over a log
         if c.log_force is not None and name in values:
             force += c.log_force(values[name], d, vehicle, f, thrust)
