@@ -154,6 +154,7 @@ def pool_results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
     return results
 
 
+@pytest.mark.xdist_group("test_experiments.py")  # the pool's results computed once
 def test_a_killed_campaign_resumes_where_it_stopped(
     tmp_path: Path, pool_results: dict[str, dict]
 ) -> None:
@@ -177,24 +178,6 @@ def test_a_killed_campaign_resumes_where_it_stopped(
 
     z = read_recording(recordings[0]).trajectory()
     assert len(z) > 1000
-
-
-@pytest.mark.skipif(
-    importlib.util.find_spec("ray") is None,
-    reason="ray is not installed (the `ray` extra: pip install -c constraints.txt -e '.[ray]')",
-)
-def test_ray_tasks_give_the_results_of_the_process_pool(
-    tmp_path: Path, pool_results: dict[str, dict]
-) -> None:
-    import ray
-
-    try:
-        results = campaign.run_trials(TINY, tmp_path, {}, ray_address="local", progress=False)
-    finally:
-        ray.shutdown()
-    assert sorted(results) == sorted(pool_results)
-    for trial_id, record in results.items():
-        assert _deterministic(record) == _deterministic(pool_results[trial_id])
 
 
 def _free_tcp_port() -> int:
@@ -246,14 +229,26 @@ def _connected(ray: Any, address: str) -> bool:
     return True
 
 
-@pytest.mark.xdist_group("test_experiments.py")  # with the other Ray test: one Ray at a time
-@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="ray is not installed")
-def test_a_two_node_ray_cluster_gives_the_local_results_of_a_bench_and_a_gather(
-    ray_cluster: str, tmp_path: Path
+@pytest.mark.xdist_group("test_experiments.py")  # the pool's results computed once
+@pytest.mark.skipif(
+    importlib.util.find_spec("ray") is None,
+    reason="ray is not installed (the `ray` extra: pip install -c constraints.txt -e '.[ray]')",
+)
+def test_a_two_node_ray_cluster_gives_the_local_results_of_a_bench_a_gather_and_trials(
+    ray_cluster: str, tmp_path: Path, pool_results: dict[str, dict]
 ) -> None:
-    """A small gap bench and a small gather run as tasks on a cluster of two nodes, then
-    here: the same scores, the same samples to the bit."""
+    """Experiment trials, a small gap bench and a small gather run as tasks on a cluster of
+    two nodes, then here: the same metrics and trajectories, the same scores, the same
+    samples to the bit; what the tasks wrote is here."""
     import shutil
+
+    trials = campaign.run_trials(TINY, tmp_path / "experiments", {}, ray_address=ray_cluster,
+                                 keep_recordings=True, progress=False)  # fmt: skip
+    assert sorted(trials) == sorted(pool_results)
+    for trial_id, record in trials.items():
+        assert _deterministic(record) == _deterministic(pool_results[trial_id])
+    recordings = sorted(p.name for p in (tmp_path / "experiments" / "recordings").glob("*.rrd"))
+    assert recordings == sorted(t.id.replace("/", "_") + "_0.rrd" for t in TINY)
 
     from mission.campaigns.gap_bench import RESULTS_FILE, run_bench
     from mission.campaigns.gap_bench_cases import CASES
