@@ -66,6 +66,28 @@ def test_a_correct_model_is_left_alone():
     assert session.snapshot.version == 0 and session.snapshot.net is BASIS
 
 
+def correlated(ground: str, n: int, seed: int, r: float) -> tuple[np.ndarray, ...]:
+    """`samples` with noise correlated from sample to sample (AR(1), lag-1 correlation `r`,
+    the same sd): what an estimated acceleration gives in flight."""
+    rng = np.random.default_rng(seed)
+    x = STATES[rng.choice(len(STATES), n)]
+    e = rng.normal(0.0, NOISE_N, (n, 3))
+    for k in range(1, n):
+        e[k] = r * e[k - 1] + np.sqrt(1.0 - r * r) * e[k]
+    return x, ground_net(ground).predict_batch(x) + e, np.arange(n) * 0.01
+
+
+def test_a_correct_model_is_left_alone_under_correlated_noise():
+    """The test counts correlated samples as the fewer independent ones they are: on the
+    home ground, noise correlated at 0.9 from sample to sample publishes nothing."""
+    session = OnlineSession(BASIS, COMPOSITE)
+    session.add_many(*correlated("rho1", 3000, seed=6, r=0.9))
+    assert session.counts["adapted"] == 0 and session.counts["recalled"] == 0
+    changed = OnlineSession(BASIS, COMPOSITE)
+    changed.add_many(*correlated("rho2", 3000, seed=6, r=0.9))
+    assert changed.counts["adapted"] >= 1  # a real change still passes
+
+
 @pytest.mark.parametrize("ground", ["rho2", "rho0.5"])
 def test_a_consistent_error_is_learnt_near_the_ground_and_the_far_field_kept(ground):
     session = OnlineSession(BASIS, COMPOSITE)

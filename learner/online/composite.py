@@ -21,7 +21,9 @@ the lateral targets are measurement noise). In standardised units throughout.
 - No harm: the estimate is published (becomes the controller's model) only when, over the
   recent window of samples, it explains the composite target (the measured force plus the
   tracking error's) better than what is published by more than `confidence` in units of
-  the noise variance (a likelihood-ratio test: (SSR_published - SSR_estimate) / sigma^2).
+  the noise variance (a likelihood-ratio test: (SSR_published - SSR_estimate) / sigma^2,
+  sigma^2 inflated by the residual's lag-1 autocorrelation: correlated samples are fewer
+  independent ones).
   A correct model is therefore left alone; a consistent error (the same sign sample after
   sample) passes the test within a fraction of a second.
 - Memory: the grounds known (the offline training grounds, protected, and every ground
@@ -151,6 +153,22 @@ def ssr(phi: np.ndarray, y: np.ndarray, a: np.ndarray) -> float:
     return float(np.sum((y - phi @ a) ** 2))
 
 
+MAX_CORRELATION = 0.95  # the lag-1 correlation the test credits at most (a factor of 39)
+
+
+def correlation_factor(residual: np.ndarray) -> float:
+    """How many samples of `residual` carry one sample's evidence: (1 + r) / (1 - r), r its
+    lag-1 autocorrelation (an AR(1) series' variance inflation; 1 for independent noise).
+    In flight the targets' noise is correlated (an estimated acceleration, filtered), and a
+    test that counted each sample as independent would publish changes to a correct model."""
+    e = residual - residual.mean()
+    denominator = float(e @ e)
+    if len(e) < 3 or denominator <= 0.0:
+        return 1.0
+    r = min(max(float(e[1:] @ e[:-1]) / denominator, 0.0), MAX_CORRELATION)
+    return (1.0 + r) / (1.0 - r)
+
+
 def kalman(
     a: np.ndarray,
     p: np.ndarray,
@@ -214,7 +232,8 @@ def composite_update(
     n = len(wy)
     published = ssr(wp, wy, state.published)
     fresh = ssr(wp, wy, a)
-    sigma2 = max(fresh / n, config.noise_floor_var)
+    # the noise variance per independent sample: correlated samples count for fewer
+    sigma2 = max(fresh / n, config.noise_floor_var) * correlation_factor(wy - wp @ a)
     gain = (published - fresh) / sigma2
     # a stored ground that explains the window as well as the fresh estimate: recall it
     best, best_gain = -1, -np.inf
