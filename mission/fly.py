@@ -303,7 +303,25 @@ def _online_lines(summary: dict[str, Any]) -> list[str]:
         f"updates, {summary.get('online_accepted', 0)} accepted, "
         f"{summary.get('online_rejected', 0)} rejected{f' ({why})' if why else ''}, "
         f"{held_text}weights version {summary.get('online_version', 0)}{loss}",
+        *_ground_lines(summary),
         *[f"  online learning: {e}" for e in summary.get("online_errors") or []],
+    ]
+
+
+def _ground_lines(summary: dict[str, Any]) -> list[str]:
+    """composite: the ground in use at the end, each ground created or recalled and when,
+    against the moment the vehicle first came near the surface."""
+    if summary.get("online_method") != "composite":
+        return []
+    near = summary.get("online_near_surface_s")
+    events = []
+    for e in summary.get("online_ground_events") or []:
+        after = f" ({e['t_s'] - near:+.1f} s from coming down near the surface)" if near else ""
+        events.append(f"{e['ground']} {e['event']} at {e['t_s']:.1f} s{after}")
+    known = ", ".join(summary.get("online_grounds") or [])
+    return [
+        f"  grounds: {summary.get('online_ground')} in use at the end (known: {known}); "
+        + ("; ".join(events) if events else "none created or recalled")
     ]
 
 

@@ -150,6 +150,7 @@ def test_flights_with_composite_do_no_harm_at_the_training_rho_and_adapt_at_rho2
     ground effect is what improved (predicted minus true force over the hold). A flight's
     summary says why updates published nothing: their likelihood ratios and the threshold."""
     from mission.campaigns.online_eval import CONTROLLERS, flight_summary, trial_file, world_file
+    from mission.fly import describe
 
     mission, start = trial_file(tmp_path, 0, 10.0)
     pd = tuple(a for p in CONTROLLERS["thesis"] for a in ("--param", p))
@@ -170,3 +171,10 @@ def test_flights_with_composite_do_no_harm_at_the_training_rho_and_adapt_at_rho2
     for _, learnt in flights.values():
         evidence = learnt["online_held_evidence"]
         assert learnt["online_held"] == 0 or evidence["max"] <= evidence["threshold"], learnt
+    # the ground learnt at rho 2 is an event of the flight, on the way down (not at the
+    # take-off: nothing tells grounds apart there), and the ground in use at the end
+    learnt = flights[2.0][1]
+    (created,) = [e for e in learnt["online_ground_events"] if e["event"] == "created"]
+    assert created["t_s"] > 5.0 and learnt["online_near_surface_s"] is not None
+    assert learnt["online_ground"] == created["ground"] == "learnt-1"
+    assert "learnt-1 created at" in describe({**learnt, "simulator": "", "ended": "landed"})

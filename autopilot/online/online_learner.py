@@ -42,6 +42,8 @@ from learner.online.settings import OnlineSettings
 from learner.online.snapshot import Snapshot, make_snapshot
 
 QUEUE_SIZE = 512  # samples: 5 s of slack before dropping
+NEAR_SURFACE_M = 0.05  # within 2 rotor radii of the surface the grounds tell apart ...
+CLEAR_OF_SURFACE_M = 0.5  # ... reached coming down from this high (not the take-off)
 CHUNK_SAMPLES = 16  # one message per 0.16 s of samples: the pipe, not the loop, carries them
 READY_TIMEOUT_S = 60.0  # the learner process imports torch: about 2 s, far more under load
 # (sim time, loss, version, what became of the update in words, the ground in use or None)
@@ -73,6 +75,14 @@ class OnlineLearner:
         self.ignored_paused = 0
         self.errors: list[str] = []
         self.losses: list[tuple[float, float, int]] = []  # (t, loss, version) per update
+        # composite: the grounds known, what became of them in flight (created, recalled) and
+        # when the vehicle first came down near the surface (before it, nothing tells them
+        # apart)
+        self.ground_events: list[dict[str, Any]] = []
+        basis = base.header.get("basis") or {}
+        self._grounds_known = {basis.get("home")} | {g["name"] for g in basis.get("learnt") or []}
+        self.near_surface_s: float | None = None
+        self._cleared_surface = False
         self.session: OnlineSession | None = None
         if deterministic:
             self.session = OnlineSession(base, settings, memory, offline)
@@ -109,6 +119,11 @@ class OnlineLearner:
         if self.paused:
             self.ignored_paused += 1
             return
+        if self.near_surface_s is None:  # features[0]: the height above the surface, m
+            if features[0] > CLEAR_OF_SURFACE_M:
+                self._cleared_surface = True
+            elif self._cleared_surface and features[0] < NEAR_SURFACE_M:
+                self.near_surface_s = t_s
         if self.session is not None:
             self._learn(features, target_n, t_s, tracking_m_s)
             return
@@ -226,7 +241,21 @@ class OnlineLearner:
         self.snapshot = snapshot  # one reference assignment: the atomic swap
         if snapshot.loss is not None:
             self.losses.append((snapshot.t_s, snapshot.loss, snapshot.version))
+        self._ground_event(snapshot, verdict)
         self._report(snapshot.t_s, snapshot.loss, verdict)
+
+    def _ground_event(self, snapshot: Snapshot, verdict: str) -> None:
+        """composite: a ground recalled, or a new one learnt (its first publication)."""
+        basis = snapshot.net.header.get("basis") or {}
+        ground = basis.get("current", basis.get("home"))
+        if verdict == "accepted (recalled)":
+            event = "recalled"
+        elif verdict == "accepted (adapted)" and ground not in self._grounds_known:
+            event = "created"
+        else:
+            return
+        self._grounds_known.add(ground)
+        self.ground_events.append({"t_s": snapshot.t_s, "event": event, "ground": ground})
 
     def _report(self, t_s: float, loss: float | None, verdict: str) -> None:
         """The update's loss and verdict, the version and ground now in use, to the recorder."""
@@ -278,6 +307,8 @@ class OnlineLearner:
             "online_recalled": counts.get("recalled", 0),
             "online_ground": basis.get("current", basis.get("home")),
             "online_grounds": [basis.get("home")] + [g["name"] for g in basis.get("learnt") or []],
+            "online_ground_events": self.ground_events,
+            "online_near_surface_s": self.near_surface_s,
         }
 
     def save(self, path: Path) -> Path:

@@ -29,8 +29,10 @@ the lateral targets are measurement noise). In standardised units throughout.
 - Memory: the grounds known (the offline training grounds, protected, and every ground
   learnt in flight) are kept with their coefficients. A ground is identified by how it
   pushes at the heights the vehicle flies: when a stored ground explains the window better
-  than what is published (by the same test) and no worse than the fresh estimate, it is
-  recalled whole (estimate, publication and a fresh prior around it). A learnt ground's
+  than what is published (the same test, with the lower threshold of a hypothesis fitted to
+  nothing: `recall_confidence`) and the fresh estimate does not explain it better by the
+  change's threshold, it is recalled whole (estimate, publication and a fresh prior around
+  it). A learnt ground's
   coefficients follow the estimate while it is the ground in use; a protected one is never
   changed (learning on it starts a new entry).
 """
@@ -55,7 +57,10 @@ class CompositeConfig:
     prior_isotropic: float  # p0
     memory_samples: float  # samples over which the prior uncertainty comes back
     tracking_gain: float  # standardised force per (m/s) of composite error
-    confidence: float  # the likelihood-ratio threshold
+    confidence: float  # the likelihood-ratio threshold of a change (an estimate, fitted)
+    # ... and of a recall: a stored ground is a fixed hypothesis, nothing fitted to the window
+    # (two simple hypotheses: a threshold of 2 ln(1/alpha), 9.2 for a 1 % error)
+    recall_confidence: float
     window: int  # samples the tests look at
     far_var: float  # the prior's variance of the prediction far from the surface
     size_sd: float  # the prior sd of a relative change of the effect's size
@@ -244,7 +249,7 @@ def composite_update(
         if g_gain > best_gain:
             best, best_gain = k, g_gain
     name = state.grounds[state.current].name
-    if best >= 0 and best_gain > config.confidence and gain - best_gain < config.confidence:
+    if best >= 0 and best_gain > config.recall_confidence and gain - best_gain < config.confidence:
         recalled = state.grounds[best].coefficients.copy()
         state = replace(
             state,

@@ -36,6 +36,7 @@ def composite_config(
         memory_samples=settings.composite_memory_samples,
         tracking_gain=settings.composite_tracking_n_s_m / target_scale_n,
         confidence=settings.composite_confidence,
+        recall_confidence=settings.composite_recall_confidence,
         window=settings.composite_window,
         far_var=(settings.composite_far_n / target_scale_n) ** 2,
         size_sd=settings.composite_size_sd,

@@ -131,6 +131,12 @@ class OnlineSettings:
     composite_confidence: float = tunable(
         "GFX_OL_CONF", 30.0, lo=0.0, hi=1e6, doc="composite: likelihood ratio a change must exceed"
     )
+    composite_recall_confidence: float = param(
+        10.0,
+        lo=0.0,
+        hi=1e6,
+        doc="composite: likelihood ratio a stored ground must exceed to be recalled",
+    )
     composite_far_n: float = param(
         3e-4,
         unit="N",
