@@ -203,6 +203,8 @@ def run_online_eval(
         for rho in rhos:
             world = world_file(d, rho)
             errors: dict[str, np.ndarray] = {}
+            model_n: dict[str, list[float | None]] = {}
+            changes: dict[str, list[int] | None] = {}
             conditions = [("offline", "neural", network, ()), ("analytic", "analytic", None, ())]
             if any(m in NEEDS_BASIS for m in methods):
                 conditions.append(("basis-offline", "neural", basis, ()))
@@ -219,8 +221,10 @@ def run_online_eval(
                         adapted[name].append(path)
                         save = ("--save-model", str(path))
                     calls.append((mission, start, world, model, rho, net, *options, *save))
-                errors[name] = errors_of(calls)
+                summaries = summaries_of(calls)
+                errors[name] = np.array([_hold(x) for x in summaries])
                 _say_row(say, f"rho_sim {rho:g}", name, errors[name])
+                model_n[name], changes[name] = _model_row(say, name, summaries)
             gaps = {
                 m: gap_closed(errors["offline"], errors["analytic"], errors[m])
                 for m in errors
@@ -233,6 +237,10 @@ def run_online_eval(
             results[f"rho{rho:g}"] = {
                 "errors_m": {k: v.tolist() for k, v in errors.items()},
                 "gap_closed": gaps,
+                # the model, not the loop: predicted minus true force over the hold, and the
+                # changes composite published (adapted or a ground recalled) in each flight
+                "model_error_n": model_n,
+                "changes_per_flight": {k: v for k, v in changes.items() if v is not None},
             }
         if remember and 2.0 in rhos:
             results["remember"] = _remember(
@@ -385,6 +393,25 @@ def _hold(summary: dict[str, Any]) -> float:
 
 def _names(names: list[str]) -> str:
     return ", ".join(names) or "none"
+
+
+def _model_row(
+    say: Callable[[str], None], name: str, summaries: list[dict[str, Any]]
+) -> tuple[list[float | None], list[int] | None]:
+    """The model's error over the hold of each flight (and, for composite, the changes it
+    published), said on one line under the hold error's."""
+    model = [x.get("ge_z_hold_rms_error_n") for x in summaries]
+    known = np.array([m for m in model if m is not None])
+    text = "n/a"
+    if len(known):
+        mean, lo, hi = mean_ci95(known)
+        text = f"{mean * 1000:6.2f} mN (95% CI {lo * 1000:.2f} to {hi * 1000:.2f})"
+    changes = None
+    if any("online_adapted" in x for x in summaries):
+        changes = [x.get("online_adapted", 0) + x.get("online_recalled", 0) for x in summaries]
+        text += f"; changes published a flight {np.mean(changes):.1f} (most {max(changes)})"
+    say(f"{'':16s} {name:10s} model error over the hold {text}")
+    return model, changes
 
 
 def _say_row(say: Callable[[str], None], where: str, name: str, errors: np.ndarray) -> None:
