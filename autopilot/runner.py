@@ -85,6 +85,7 @@ class LoopState:
     schedule: SampleSchedule = SampleSchedule()
     drawn_plan: tuple | None = None  # the plan the recording shows
     landed: CommanderState | None = None  # a long run's flight that has landed, until closed
+    landing_closed: bool = False  # its figures kept: not again while it rests on that landing
     armed_s: float | None = None  # a long run's: when the vehicle last left the ground's rest
 
 
@@ -360,7 +361,9 @@ def _bound_trace(p: Parts, s: LoopState, t: float) -> None:
         s.armed_s = t  # its time limit counts from here
     elif resting:
         s.armed_s = None
-    if phase == Phase.LANDED and s.landed is None:
+    if phase != Phase.LANDED:
+        s.landing_closed = False
+    elif s.landed is None and not s.landing_closed:
         s.landed = s.cmd  # the flight's own plan says where it meant to land
     ended = s.landed or (s.cmd if phase == Phase.DISARMED and trace.flew() else None)
     if ended is None:
@@ -374,6 +377,9 @@ def _bound_trace(p: Parts, s: LoopState, t: float) -> None:
     figures = {k: v for k, v in figures.items() if k not in ("wall_s", "rtf")}
     trace.close_flight({**figures, "ended": "landed" if ended is s.landed else "disarmed"})
     s.landed = None
+    # a vehicle that stays landed (armed: its disarm is late, or a ground station keeps it
+    # so) ended one flight, however many steps it rests
+    s.landing_closed = phase == Phase.LANDED
 
 
 def _ended(config: AutopilotConfig, s: LoopState, t: float) -> str | None:

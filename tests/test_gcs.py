@@ -330,6 +330,13 @@ def test_sitl_takes_off_flies_offboard_and_a_fence_breach_returns_home():
         position = gs.wait_for("position", lambda m: m.get_type() == "LOCAL_POSITION_NED", 5.0)
         assert abs(position.x) < 0.03 and abs(position.y) < 0.03  # landed at home
         assert any("failsafe: geofence" in t for t in gs.progress.texts), gs.progress.texts
+        # resting on the ground for 2 s of the vehicle's time is still the one flight
+        rested_ms = position.time_boot_ms + 2000
+        gs.wait_for(
+            "2 s at rest",
+            lambda m: m.get_type() == "LOCAL_POSITION_NED" and m.time_boot_ms >= rested_ms,
+            30.0,
+        )
     finally:
         sitl.send_signal(signal.SIGINT)
         try:
