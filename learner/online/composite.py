@@ -30,9 +30,10 @@ the lateral targets are measurement noise). In standardised units throughout.
   learnt in flight) are kept with their coefficients. A ground is identified by how it
   pushes at the heights the vehicle flies: when a stored ground explains the window better
   than what is published (the same test, with the lower threshold of a hypothesis fitted to
-  nothing: `recall_confidence`) and the fresh estimate does not explain it better by the
-  change's threshold, it is recalled whole (estimate, publication and a fresh prior around
-  it). A learnt ground's
+  nothing, `recall_confidence`, while the flight is on the ground it started on; the
+  change's once it recalled or learnt one) and the fresh estimate does not explain it
+  better by the change's threshold, it is recalled whole (estimate, publication and a fresh
+  prior around it). A learnt ground's
   coefficients follow the estimate while it is the ground in use; a protected one is never
   changed (learning on it starts a new entry).
 """
@@ -85,6 +86,7 @@ class CompositeState:
     window_phi: np.ndarray  # (<= window, n + 1) recent basis values
     window_y: np.ndarray  # (<= window,) recent vertical targets
     learnt: int = 0  # grounds learnt so far (names)
+    settled: bool = False  # a ground was recalled or learnt in this flight
 
 
 @dataclass(frozen=True)
@@ -249,7 +251,11 @@ def composite_update(
         if g_gain > best_gain:
             best, best_gain = k, g_gain
     name = state.grounds[state.current].name
-    if best >= 0 and best_gain > config.recall_confidence and gain - best_gain < config.confidence:
+    # leaving the ground the flight started on for a stored one takes the recall's evidence;
+    # once the flight's data chose a ground, going over to another is a change like any
+    # other (two stored grounds that differ little would otherwise take turns)
+    threshold = config.confidence if state.settled else config.recall_confidence
+    if best >= 0 and best_gain > threshold and gain - best_gain < config.confidence:
         recalled = state.grounds[best].coefficients.copy()
         state = replace(
             state,
@@ -257,6 +263,7 @@ def composite_update(
             covariance=state.prior.copy(),
             published=recalled.copy(),
             current=best,
+            settled=True,
         )
         return state, Decision("recalled", best_gain, state.grounds[best].name)
     if gain <= config.confidence:
@@ -273,7 +280,12 @@ def composite_update(
     else:
         grounds[current] = replace(grounds[current], coefficients=a.copy())
     state = replace(
-        state, published=a.copy(), grounds=tuple(grounds), current=current, learnt=learnt
+        state,
+        published=a.copy(),
+        grounds=tuple(grounds),
+        current=current,
+        learnt=learnt,
+        settled=True,
     )
     return state, Decision("adapted", gain, grounds[current].name)
 
