@@ -377,9 +377,7 @@ def _bound_trace(p: Parts, s: LoopState, t: float) -> None:
     figures = {k: v for k, v in figures.items() if k not in ("wall_s", "rtf")}
     trace.close_flight({**figures, "ended": "landed" if ended is s.landed else "disarmed"})
     s.landed = None
-    # a vehicle that stays landed (armed: its disarm is late, or a ground station keeps it
-    # so) ended one flight, however many steps it rests
-    s.landing_closed = phase == Phase.LANDED
+    s.landing_closed = phase == Phase.LANDED  # one flight, however long it rests after
 
 
 def _ended(config: AutopilotConfig, s: LoopState, t: float) -> str | None:
