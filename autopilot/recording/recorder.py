@@ -75,14 +75,7 @@ class NullRecorder:
     def event(self, text: str, level: str = "INFO", t_s: float | None = None) -> None:
         pass
 
-    def learner(
-        self,
-        t_s: float,
-        loss: float | None = None,
-        version: int | None = None,
-        note: str = "",
-        ground: str | None = None,
-    ) -> None:
+    def learner(self, *args: object, **kwargs: object) -> None:
         pass
 
     def estimator(self, t_s: float, errors: Sequence[float], test_ratios: dict[str, float]) -> None:
