@@ -104,6 +104,21 @@ def _folds(problem: Problem) -> list[tuple[list[np.ndarray], list[np.ndarray]]]:
 Part = tuple[FlightData, np.ndarray, np.ndarray]
 
 
+def _cross_validated_parts(
+    problem: Problem, xs: list[np.ndarray], ys: list[np.ndarray], after: list[np.ndarray]
+) -> list[Part]:
+    """Each fold's unseen rows, with a network trained on the rest (`_folds`)."""
+    parts: list[Part] = []
+    for train, test in _folds(problem):
+        x = np.concatenate([a[m] for a, m in zip(xs, train, strict=True)])
+        y = np.concatenate([a[m] for a, m in zip(ys, train, strict=True)])
+        model = train_model(x, y)
+        for d, a, xf, m in zip(problem.flights, after, xs, test, strict=True):
+            if m.any():
+                parts.append((_masked(d, m), a[m], a[m] - model.force_n(xf[m])))
+    return parts
+
+
 def learn_unexplained(problem: Problem, values: Values, hold: Problem | None = None) -> Unexplained:
     """The residual `values` leave on the fitting flights: how large, whether it has structure
     outside the catalogue (learnt on the fitting flights, it shrinks on the `hold` flights;
@@ -113,15 +128,6 @@ def learn_unexplained(problem: Problem, values: Values, hold: Problem | None = N
     after = [r - p for r, p in zip(problem.residuals, problem.predicted(values), strict=True)]
     before_gap = _gap(problem.flights, problem.residuals, problem.noise_var)
     after_gap = _gap(problem.flights, after, problem.noise_var)
-    cv_parts: list[Part] = []
-    for train, test in _folds(problem):
-        x = np.concatenate([a[m] for a, m in zip(xs, train, strict=True)])
-        y = np.concatenate([a[m] for a, m in zip(ys, train, strict=True)])
-        model = train_model(x, y)
-        for d, a, xf, m in zip(problem.flights, after, xs, test, strict=True):
-            if m.any():
-                cv_parts.append((_masked(d, m), a[m], a[m] - model.force_n(xf[m])))
-    learnable = _parts_gain(cv_parts, problem.noise_var)
     share = after_gap / before_gap if before_gap > 0 else 0.0
     x_all, y_all = np.concatenate(xs), np.concatenate(ys)
     model = train_model(x_all, y_all)
@@ -130,13 +136,14 @@ def learn_unexplained(problem: Problem, values: Values, hold: Problem | None = N
         parts, x_test, y_test = _held_out_parts(hold, values, model)
         gain, where = _parts_gain(parts, hold.noise_var), "the held-out flights"
         margin = noise_margin_n2(parts, hold.noise_var)
-    else:
+    else:  # the fitting flights left out in turn (a network per fold) stand in for them
+        parts = _cross_validated_parts(problem, xs, ys, after)
         first = _folds(problem)[0][1]
         x_test = np.concatenate([a[m] for a, m in zip(xs, first, strict=True)])
         y_test = np.concatenate([a[m] for a, m in zip(ys, first, strict=True)])
         x_all = np.concatenate([a[~m] for a, m in zip(xs, first, strict=True)])
         y_all = np.concatenate([a[~m] for a, m in zip(ys, first, strict=True)])
-        gain, parts, where = learnable, cv_parts, "fitting flights it was not trained on"
+        gain, where = _parts_gain(parts, problem.noise_var), "fitting flights it was not trained on"
         margin = noise_margin_n2(parts, problem.noise_var)
     removed = removed_n2(parts)
     structure = has_structure(gain, removed, margin)
@@ -146,7 +153,6 @@ def learn_unexplained(problem: Problem, values: Values, hold: Problem | None = N
         "share": float(share),
         "gap_before_n": before_gap,
         "gap_after_catalogue_n": after_gap,
-        "learnable_share": learnable,
         "scored_on": "held_out" if held else "cross_validated",
         "learnt_gain": gain,
         "learnt_removed_n2": removed,

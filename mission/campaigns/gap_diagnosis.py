@@ -20,7 +20,7 @@ from learner.gap.diagnose import STAGES as DIAGNOSE_STAGES
 from learner.gap.diagnose import check_candidates, diagnose
 from learner.gap.report import corrected_world_yaml, figures, write_outputs
 from learner.gap.rollout import shrink, tracking_difference_m
-from mission.campaigns.gap_flights import fly_log
+from mission.campaigns.gap_flights import replay_flight
 from simbridge.config import ConfigError
 from simbridge.vehicle import (
     Vehicle,
@@ -204,12 +204,6 @@ def replay_limit_s(log: Any) -> float:
     """How many simulated seconds a replay of `log`'s mission may fly."""
     logged_s = float(log.time_s[-1] - log.time_s[0]) if len(log) else 0.0
     return max(REPLAY_MIN_S, REPLAY_TIME_FACTOR * logged_s + REPLAY_MARGIN_S)
-
-
-def replay_flight(mission: str, world: str, path: str, max_flight_s: float) -> dict[str, Any]:
-    """One replay (a task of the campaign runner): the flight's log at `path`."""
-    fly_log(Path(mission), Path(world), Path(path), max_flight_s=max_flight_s)
-    return {"path": path}
 
 
 def replay_missions(

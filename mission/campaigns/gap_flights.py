@@ -219,3 +219,10 @@ def real_log(
     log = read_log(clean)
     noisy: FlightLog = add_noise(log, noise, seed)
     return write_log(noisy, out)
+
+
+def replay_flight(mission: str, world: str, path: str, max_flight_s: float) -> dict[str, Any]:
+    """One replay of a diagnosis (a task of the campaign runner): the flight's log at `path`.
+    Here, not beside the diagnosis: a worker that only flies imports no fitting or network."""
+    fly_log(Path(mission), Path(world), Path(path), max_flight_s=max_flight_s)
+    return {"path": path}
