@@ -11,7 +11,7 @@ import numpy as np
 
 from learner.flightlogs.flightlog import FlightLog, write_log
 from learner.flightlogs.readers import read_log
-from tests.helpers import run_groundfx
+from tests.helpers import groundfx_in_process
 from tests.test_flightlogs_autopilot_logs import NANO, assert_round_trip, known_flight, ned_frd
 from tests.test_flightlogs_cfusd import known_flight as crazyflie_flight
 from tests.test_flightlogs_cfusd import legacy_cfusd
@@ -55,10 +55,11 @@ def test_a_written_ulog_reads_back_to_the_flight(tmp_path: Path) -> None:
 
 def diagnose(tmp_path: Path, logs: list[Path], *options: str) -> dict:
     out = tmp_path / "diagnosis"
-    # the formats' reading is under test here, not the search: a few candidates
-    r = run_groundfx("gap", "diagnose", *map(str, logs), "--no-replay", "--folds", "2",
-                     "--out", str(out), "--candidates", "thrust_mass,rotor_drag,ground_effect",
-                     *options, timeout=300)  # fmt: skip
+    # the formats' reading is under test here, not the search: a few candidates (the
+    # command in this process: tests/test_flightlogs_autopilot_logs.py runs it as one)
+    r = groundfx_in_process("gap", "diagnose", *map(str, logs), "--no-replay", "--folds", "2",
+                            "--out", str(out), "--candidates",
+                            "thrust_mass,rotor_drag,ground_effect", *options)  # fmt: skip
     assert r.returncode == 0, r.stderr
     assert "Traceback" not in r.stderr
     gap = json.loads((out / "gap.json").read_text())

@@ -11,7 +11,6 @@ import dataclasses
 import json
 import math
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +26,7 @@ from mission.campaigns.gap_diagnosis import run_diagnosis
 from simbridge.config import ConfigError
 from simbridge.vehicle import GRAVITY_M_S2, Vehicle, load_vehicle
 from simbridge.world import load_world
+from tests.helpers import groundfx_in_process
 
 DT_S = 0.01
 NANO = load_vehicle("nano")
@@ -133,10 +133,9 @@ FEW = ["thrust_mass", "body_drag", "rotor_drag", "ground_effect"]
 
 
 def cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "mission.cli", "gap", "diagnose", *args],
-        capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
+    """`groundfx gap diagnose ARGS`, in this process (tests/test_flightlogs_autopilot_logs.py runs
+    it as a process of its own)."""
+    return groundfx_in_process("gap", "diagnose", *args)
 
 
 # 1. a replay the corrected world cannot fly --------------------------------------------------
