@@ -337,7 +337,7 @@ class Simulation:
         since_s = self.time_since_takeoff_s
         vel, _ = pb.getBaseVelocity(self._body, physicsClientId=self._cid)
         lf = learned_force_n(
-            self._learned, heights, (m[2], m[5], m[8]), vel, f, since_s,
+            self._learned, heights, m, self._pose[0], vel, f, since_s,
             self._radius, self.vehicle.weight_n,
         )  # fmt: skip
         force[0] += lf[0]

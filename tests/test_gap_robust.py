@@ -62,14 +62,16 @@ def world_file(path: Path, vehicle: str | None = None, **extra: Any) -> Path:
     return path
 
 
-def trajectory(seconds: float, seed: int, low_m: float = 0.12) -> dict[str, np.ndarray]:
-    """A smooth Lissajous flight (speeds up to about 2 m/s, heights `low_m` to 0.8 m): time,
-    position, velocity, acceleration."""
+def trajectory(
+    seconds: float, seed: int, low_m: float = 0.12, axes: tuple[float, float] = (2.0, 1.5)
+) -> dict[str, np.ndarray]:
+    """A smooth Lissajous flight (speeds up to about 2 m/s, `axes` its x and y amplitudes in
+    m, heights `low_m` to 0.8 m): time, position, velocity, acceleration."""
     rng = np.random.default_rng(seed)
     ph = rng.uniform(0, 2 * np.pi, 3)
     t = np.arange(0.0, seconds, DT_S)
     w = np.array([0.9, 0.7, 0.5])
-    amp = np.array([2.0, 1.5, 0.5 * (0.8 - low_m)])
+    amp = np.array([*axes, 0.5 * (0.8 - low_m)])
     arg = w[None, :] * t[:, None] + ph[None, :]
     p = amp * np.sin(arg)
     p[:, 2] += low_m + amp[2]
@@ -87,12 +89,13 @@ def synthetic_log(
     seconds: float = 30.0,
     meta: dict | None = None,
     low_m: float = 0.12,
+    axes: tuple[float, float] = (2.0, 1.5),
 ) -> FlightLog:
     """A flight along `trajectory` whose logged acceleration is what the diagnosis's force
     model gives for a world with the effects `true` (the nominal world's included), with
     a motion-capture pose's and an IMU's noise."""
     rng = np.random.default_rng(seed + 1000)
-    tr = trajectory(seconds, seed, low_m)
+    tr = trajectory(seconds, seed, low_m, axes)
     f = tr["a"] + np.array([0.0, 0.0, GRAVITY_M_S2])  # specific force the thrust must give
     zb = f / np.linalg.norm(f, axis=1, keepdims=True)
     xb = np.array([1.0, 0.0, 0.0]) - zb[:, :1] * zb

@@ -3,6 +3,7 @@ residual: their pure functions, and each one felt by the PyBullet vehicle."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -12,7 +13,14 @@ import yaml
 
 from simbridge.config import ConfigError
 from simbridge.effects import UNCATALOGUED, parse_effects
-from simbridge.effects.learned import FEATURES, ResidualModel, save_residual_model
+from simbridge.effects.learned import (
+    FEATURES,
+    ResidualModel,
+    headings,
+    load_residual_model,
+    residual_features,
+    save_residual_model,
+)
 from simbridge.effects.uncatalogued import (
     GroundEffectExponentialParams,
     GroundOutwashParams,
@@ -189,3 +197,25 @@ def test_a_learned_residual_without_its_model_file_is_refused_naming_the_field(t
     path = world_yaml(tmp_path / "world.yaml", [{"name": "learned_residual"}])
     with pytest.raises(ConfigError, match=r"learned_residual.model_path: no such file"):
         load_world(path)
+
+
+def test_a_learnt_force_turns_with_the_heading_and_a_model_names_its_inputs(tmp_path: Path):
+    """The network's output is in the heading frame: a forward push flown at yaw 90 deg
+    pushes along world y. A model on some of the features loads; one on a feature this
+    version does not compute is refused with both lists."""
+    model = constant_model((0.02, 0.0, 0.0))
+    yaw90 = np.array([[[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]])
+    x = residual_features(np.full((1, 4), np.inf), yaw90, np.zeros((1, 3)), np.zeros((1, 3)),
+                          np.full((1, 4), 0.01), np.zeros(1), R, MASS * GRAVITY_M_S2)  # fmt: skip
+    assert model.force_n(x, headings(yaw90))[0] == pytest.approx((0.0, 0.02, 0.0), abs=1e-12)
+    some = dataclasses.replace(
+        model, weights=(np.zeros((3, 2)),), input_mean=np.zeros(2), input_std=np.ones(2),
+        features=("horizontal_speed_m_s", "height_0"),
+    )  # fmt: skip
+    save_residual_model(tmp_path / "some.npz", some)
+    assert load_residual_model(str(tmp_path / "some.npz")).columns == [7, 0]
+    save_residual_model(
+        tmp_path / "old.npz", dataclasses.replace(some, features=("vx_m_s", "height_0"))
+    )
+    with pytest.raises(ConfigError, match=r"written for the features \['vx_m_s', 'height_0'\]"):
+        load_residual_model(str(tmp_path / "old.npz"))

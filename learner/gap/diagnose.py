@@ -14,6 +14,7 @@ from learner.flightlogs.flightlog import FlightLog
 from learner.gap import fit as gapfit
 from learner.gap.candidates import CANDIDATES, Values, nominal_values
 from learner.gap.corrected import corrected_members, is_sensor
+from learner.gap.disagreement import flights_disagree
 from learner.gap.flightdata import FlightData, describe_left_out, prepare
 from learner.gap.ground_level import level_logs
 from learner.gap.plausibility import check as check_plausible
@@ -25,6 +26,7 @@ from learner.gap.residual import (
     residual_n,
     white_floor_ms,
 )
+from learner.gap.residual_net import STATE_INPUTS
 from learner.gap.rollout import HORIZON_S, rms, rollout_errors, shrink
 from learner.gap.search import forward_search
 from learner.gap.stats import ess_ratio
@@ -32,7 +34,7 @@ from learner.gap.summaries import extra_rules, summaries
 from learner.gap.torque import torque_gap
 from learner.gap.unexplained import held_out_learned, learn_unexplained
 from learner.gap.verdicts import effect_report, mark_confidence, per_flight_values
-from simbridge.effects.learned import ResidualModel
+from simbridge.effects.learned import POSITION, ResidualModel
 from simbridge.vehicle import Vehicle
 from simbridge.world import World
 
@@ -203,7 +205,12 @@ def diagnose(
     else:
         gap = cross_validated_gap(problem, best.names, folds)
     on_stage(STAGES[3])
-    left = learn_unexplained(problem, best.values, hold_problem)
+    fit_left = [
+        r - p for r, p in zip(problem.residuals, problem.predicted(best.values), strict=True)
+    ]
+    disagree = flights_disagree(fit_data, fit_left, vehicle)
+    inputs = STATE_INPUTS + POSITION if disagree else STATE_INPUTS
+    left = learn_unexplained(problem, best.values, hold_problem, inputs)
     corrected = [
         r - p
         for r, p in zip(
@@ -214,6 +221,7 @@ def diagnose(
     left_table = regime_table(all_data, corrected, vehicle)
     unexplained["where"] = where(left_table)
     unexplained["rules"] = rules(left_table)
+    unexplained["disagreement"] = disagree
     if hold_problem is not None:
         gap["force_rms_n_learned"] = held_out_learned(hold_problem, best.values, left.model)
     mark_confidence(effects, unexplained)
@@ -230,7 +238,7 @@ def diagnose(
         chosen=best.values,
         search=trail,
         regimes=table,
-        rules=rules(table) + extra_rules(whole),
+        rules=rules(table) + extra_rules(whole) + ([disagree["sentence"]] if disagree else []),
         summaries=whole,
         gap=gap,
         vehicle=vehicle,

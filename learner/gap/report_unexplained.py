@@ -64,9 +64,10 @@ def _plot(shape: dict[str, Any], path: Path) -> Path:
         if name == "height_log1p_radii":
             grid = np.expm1(grid)
         f = np.asarray(pd["force_n"]) * 1000
-        for i, (axis, colour) in enumerate(zip("xyz", ("tab:red", "tab:green", "tab:blue"),
+        axes_ = ("forward", "left", "up")  # the heading frame
+        for i, (axis, colour) in enumerate(zip(axes_, ("tab:red", "tab:green", "tab:blue"),
                                                strict=True)):  # fmt: skip
-            ax.plot(grid, f[:, i], color=colour, label=f"world {axis}")
+            ax.plot(grid, f[:, i], color=colour, label=axis)
         ax.set(xlabel=labels.get(name, name), ylabel="learnt residual force (mN)")
         ax.axhline(0.0, color="grey", lw=0.5)
     np.atleast_1d(axes)[0].legend(fontsize=7)

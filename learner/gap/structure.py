@@ -28,8 +28,8 @@ from learner.gap.residual import (
     smooth_per_segment,
     white_floor_ms,
 )
-from learner.gap.residual_net import train_model
-from simbridge.effects.learned import FEATURES
+from learner.gap.residual_net import STATE_INPUTS, train_model
+from simbridge.effects.learned import POSITION
 
 STRUCTURE_GAIN = 0.20  # the learnt residual removes at least this share of what is left
 Z95 = 1.959964
@@ -40,11 +40,13 @@ SHARE_MIN = 0.10  # below this share of the gap the catalogue leaves, a remainde
 
 INPUT_GROUPS: dict[str, tuple[str, ...]] = {
     "height above the surface": tuple(f"height_{i}" for i in range(4)),
-    "tilt (the body's z axis)": ("body_z_x", "body_z_y", "body_z_z"),
-    "horizontal velocity (world frame)": ("vx_m_s", "vy_m_s"),
+    "tilt": ("tilt_forward", "tilt_left", "body_z_up"),
+    "horizontal speed": ("horizontal_speed_m_s",),
+    "direction of travel relative to the body": ("travel_forward", "travel_left"),
     "vertical speed": ("vz_m_s",),
     "rotor thrust": tuple(f"thrust_{i}" for i in range(4)),
     "time since take-off": ("time_since_takeoff_s",),
+    "position": POSITION,
 }
 
 
@@ -94,19 +96,24 @@ def has_structure(gain: float | None, removed: float, margin: float) -> bool:
 
 
 def input_losses(
-    x_train: np.ndarray, y_train: np.ndarray, x_test: np.ndarray, y_test: np.ndarray
+    x_train: np.ndarray,
+    y_train: np.ndarray,
+    x_test: np.ndarray,
+    y_test: np.ndarray,
+    inputs: tuple[str, ...] = STATE_INPUTS,
 ) -> dict[str, Any]:
     """What each input group carries: the unseen rows' loss (mean square of the smoothed
-    residual `y_test` less the network's force) with every input, with none of the network,
-    and with each group left out (its columns held constant, the network retrained); each
-    group's `loss_share` is its absence's loss increase over what the network removes."""
+    residual `y_test`, heading frame, less the network's force) with every one of `inputs`,
+    with none of the network, and with each group left out (the network retrained without
+    it); each group's `loss_share` is its absence's loss increase over what the network
+    removes."""
 
-    def loss(cols: tuple[int, ...]) -> float:
-        xtr, xte = x_train.copy(), x_test.copy()
-        xtr[:, cols] = 0.0
-        xte[:, cols] = 0.0
-        model = train_model(xtr, y_train, epochs=FAST_EPOCHS, max_rows=FAST_ROWS, lr=FAST_LR)
-        return float(np.mean(np.sum((y_test - model.force_n(xte)) ** 2, axis=1)))
+    def loss(left_out: tuple[str, ...]) -> float:
+        kept = tuple(f for f in inputs if f not in left_out)
+        model = train_model(
+            x_train, y_train, epochs=FAST_EPOCHS, max_rows=FAST_ROWS, lr=FAST_LR, inputs=kept
+        )
+        return float(np.mean(np.sum((y_test - model.heading_force_n(x_test)) ** 2, axis=1)))
 
     none = float(np.mean(np.sum(y_test**2, axis=1)))
     full = loss(())
@@ -115,8 +122,8 @@ def input_losses(
     if removed <= 0.0:
         return out
     for name, group in INPUT_GROUPS.items():
-        cols = tuple(FEATURES.index(f) for f in group)
-        out["inputs"].append({"input": name, "loss_share": (loss(cols) - full) / removed})
+        if any(f in inputs for f in group):
+            out["inputs"].append({"input": name, "loss_share": (loss(group) - full) / removed})
     out["inputs"].sort(key=lambda i: -i["loss_share"])
     return out
 
@@ -127,8 +134,8 @@ def carried_by(inputs: list[dict[str, Any]]) -> list[str]:
 
 
 def carriers_text(inputs: list[dict[str, Any]]) -> str:
-    """'carried by horizontal velocity (world frame) (left out of the network's inputs, it
-    loses 64% of what the network removes) and ...', or why no input is named."""
+    """'the inputs that carry it: direction of travel relative to the body (64%) ...' (the
+    share of what the network removes lost without it), or why no input is named."""
     named = [i for i in inputs if i["loss_share"] >= CARRIER_MIN]
     if named:
         parts = [f"{i['input']} ({min(i['loss_share'], 1.0) * 100:.0f}%)" for i in named]
@@ -196,8 +203,9 @@ def sentence(
     # the vehicle's (a neighbour's wake, gusts), or a function of what the inputs leave out
     return head + (
         ": no structure the learnt residual finds: what is left is no function of the "
-        "vehicle's state as the network sees it (height, tilt, velocity, thrust, time in the "
-        "air) that holds from flight to flight (it differs between them: another "
-        "vehicle's wake, gusts, the logs themselves; or it depends on what those inputs leave "
-        "out, such as the position; or, where the gap is near the noise floor, noise)"
+        "vehicle's state as the network sees it (height, tilt, speed and direction of travel, "
+        "thrust, time in the air) that holds from flight to flight (it differs between them: "
+        "another vehicle's wake, gusts, the logs themselves; or it depends on what those "
+        "inputs leave out, such as the position; or, where the gap is near the noise floor, "
+        "noise)"
     )

@@ -25,7 +25,7 @@ from learner.gap.candidates import Values
 from learner.gap.fit import Problem
 from learner.gap.flightdata import FlightData
 from learner.gap.residual import SMOOTH_WINDOW_S, force_gap_ms, smooth_per_segment
-from learner.gap.residual_net import train_model
+from learner.gap.residual_net import STATE_INPUTS, train_model
 from learner.gap.rollout import shrink
 from learner.gap.rotor_forces import rotor_forces_n
 from learner.gap.structure import (
@@ -38,7 +38,13 @@ from learner.gap.structure import (
     removed_n2,
     sentence,
 )
-from simbridge.effects.learned import FEATURES, ResidualModel, residual_features
+from simbridge.effects.learned import (
+    FEATURES,
+    ResidualModel,
+    headings,
+    residual_features,
+    to_heading,
+)
 from simbridge.vehicle import Vehicle
 
 BLOCK_S = 5.0  # alternate blocks as folds when there is one fitting flight
@@ -49,7 +55,8 @@ def features(d: FlightData, values: Values, vehicle: Vehicle) -> np.ndarray:
     """The learnt residual's features of one flight in a world with `values`."""
     return residual_features(
         d.rotor_heights_m,
-        d.rotation[:, :, 2],
+        d.rotation,
+        d.position_m,
         d.velocity_m_s,
         rotor_forces_n(values, d, vehicle),
         d.time_s - d.time_s[0],
@@ -65,14 +72,14 @@ class Unexplained:
 
 
 def _targets(problem: Problem, values: Values) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """Per flight: the features and the residual left by `values`, averaged over
-    SMOOTH_WINDOW_S (the systematic part is what there is to learn)."""
+    """Per flight: the features and the residual left by `values` in the heading frame,
+    averaged over SMOOTH_WINDOW_S (the systematic part is what there is to learn)."""
     merged = {**problem.nominal, **values}
     xs, ys = [], []
     for d, r, p in zip(problem.flights, problem.residuals, problem.predicted(values), strict=True):
         w = max(1, round(SMOOTH_WINDOW_S / d.dt_s))
         xs.append(features(d, merged, problem.vehicle))
-        ys.append(smooth_per_segment(r - p, d.segment, w))
+        ys.append(to_heading(smooth_per_segment(r - p, d.segment, w), headings(d.rotation)))
     return xs, ys
 
 
@@ -105,21 +112,31 @@ Part = tuple[FlightData, np.ndarray, np.ndarray]
 
 
 def _cross_validated_parts(
-    problem: Problem, xs: list[np.ndarray], ys: list[np.ndarray], after: list[np.ndarray]
+    problem: Problem,
+    xs: list[np.ndarray],
+    ys: list[np.ndarray],
+    after: list[np.ndarray],
+    inputs: tuple[str, ...],
 ) -> list[Part]:
     """Each fold's unseen rows, with a network trained on the rest (`_folds`)."""
     parts: list[Part] = []
     for train, test in _folds(problem):
         x = np.concatenate([a[m] for a, m in zip(xs, train, strict=True)])
         y = np.concatenate([a[m] for a, m in zip(ys, train, strict=True)])
-        model = train_model(x, y)
+        model = train_model(x, y, inputs=inputs)
         for d, a, xf, m in zip(problem.flights, after, xs, test, strict=True):
             if m.any():
-                parts.append((_masked(d, m), a[m], a[m] - model.force_n(xf[m])))
+                learnt = model.force_n(xf[m], headings(d.rotation[m]))
+                parts.append((_masked(d, m), a[m], a[m] - learnt))
     return parts
 
 
-def learn_unexplained(problem: Problem, values: Values, hold: Problem | None = None) -> Unexplained:
+def learn_unexplained(
+    problem: Problem,
+    values: Values,
+    hold: Problem | None = None,
+    inputs: tuple[str, ...] = STATE_INPUTS,
+) -> Unexplained:
     """The residual `values` leave on the fitting flights: how large, whether it has structure
     outside the catalogue (learnt on the fitting flights, it shrinks on the `hold` flights;
     without them, on fitting flights left out in turn) and what carries it, and the model
@@ -130,14 +147,14 @@ def learn_unexplained(problem: Problem, values: Values, hold: Problem | None = N
     after_gap = _gap(problem.flights, after, problem.noise_var)
     share = after_gap / before_gap if before_gap > 0 else 0.0
     x_all, y_all = np.concatenate(xs), np.concatenate(ys)
-    model = train_model(x_all, y_all)
+    model = train_model(x_all, y_all, inputs=inputs)
     held = hold is not None and bool(hold.flights)
     if hold is not None and held:
         parts, x_test, y_test = _held_out_parts(hold, values, model)
         gain, where = _parts_gain(parts, hold.noise_var), "the held-out flights"
         margin = noise_margin_n2(parts, hold.noise_var)
     else:  # the fitting flights left out in turn (a network per fold) stand in for them
-        parts = _cross_validated_parts(problem, xs, ys, after)
+        parts = _cross_validated_parts(problem, xs, ys, after, inputs)
         first = _folds(problem)[0][1]
         x_test = np.concatenate([a[m] for a, m in zip(xs, first, strict=True)])
         y_test = np.concatenate([a[m] for a, m in zip(ys, first, strict=True)])
@@ -147,7 +164,7 @@ def learn_unexplained(problem: Problem, values: Values, hold: Problem | None = N
         margin = noise_margin_n2(parts, problem.noise_var)
     removed = removed_n2(parts)
     structure = has_structure(gain, removed, margin)
-    carriers = input_losses(x_all, y_all, x_test, y_test) if structure else None
+    carriers = input_losses(x_all, y_all, x_test, y_test, inputs) if structure else None
     inputs = (carriers or {}).get("inputs", [])
     summary: dict[str, Any] = {
         "share": float(share),
@@ -209,7 +226,10 @@ def _held_out_parts(
     `values` (the rows the leave-one-input-out networks are scored on)."""
     xs, ys = _targets(hold, values)
     after = [r - p for r, p in zip(hold.residuals, hold.predicted(values), strict=True)]
-    parts = [(d, a, a - model.force_n(x)) for d, a, x in zip(hold.flights, after, xs, strict=True)]
+    parts = [
+        (d, a, a - model.force_n(x, headings(d.rotation)))
+        for d, a, x in zip(hold.flights, after, xs, strict=True)
+    ]
     return parts, np.concatenate(xs), np.concatenate(ys)
 
 
@@ -224,19 +244,24 @@ def _masked(d: FlightData, m: np.ndarray) -> FlightData:
 
 
 def partial_dependence(model: ResidualModel, x: np.ndarray) -> dict[str, Any]:
-    """The learnt force (N, world x y z) against height (all rotors together), time since
-    take-off, horizontal speed and total thrust, the other features as logged (averaged)."""
+    """The learnt force (N, heading frame: forward, left, up) against height (all rotors
+    together), time since take-off, horizontal speed and total thrust, the other features as
+    logged (averaged)."""
     if len(x) > 2000:
         x = x[np.linspace(0, len(x) - 1, 2000).astype(int)]
     out: dict[str, Any] = {}
     heights = [FEATURES.index(f"height_{i}") for i in range(4)]
     thrusts = [FEATURES.index(f"thrust_{i}") for i in range(4)]
     t_col = FEATURES.index("time_since_takeoff_s")
-    vx, vy = FEATURES.index("vx_m_s"), FEATURES.index("vy_m_s")
+    speed = FEATURES.index("horizontal_speed_m_s")
     lo_h, hi_h = np.percentile(x[:, heights], [1, 99])
     grids = {
         "height_log1p_radii": (heights, np.linspace(lo_h, hi_h, PDP_POINTS)),
         "time_since_takeoff_s": ([t_col], np.linspace(0, x[:, t_col].max(), PDP_POINTS)),
+        "horizontal_speed_m_s": (
+            [speed],
+            np.linspace(0.0, np.percentile(x[:, speed], 99), PDP_POINTS),
+        ),
         "thrust_per_rotor_over_quarter_weight": (
             thrusts,
             np.linspace(*np.percentile(x[:, thrusts], [1, 99]), PDP_POINTS),
@@ -247,18 +272,8 @@ def partial_dependence(model: ResidualModel, x: np.ndarray) -> dict[str, Any]:
         for g in grid:
             moved = x.copy()
             moved[:, cols] = g
-            forces.append(model.force_n(moved).mean(axis=0))
+            forces.append(model.heading_force_n(moved).mean(axis=0))
         out[name] = {"grid": grid.tolist(), "force_n": np.array(forces).tolist()}
-    speed = np.hypot(x[:, vx], x[:, vy])
-    grid = np.linspace(0.0, np.percentile(speed, 99), PDP_POINTS)
-    forces = []
-    for g in grid:
-        moved = x.copy()
-        scale = np.where(speed > 1e-6, g / np.maximum(speed, 1e-6), 0.0)
-        moved[:, vx] *= scale
-        moved[:, vy] *= scale
-        forces.append(model.force_n(moved).mean(axis=0))
-    out["horizontal_speed_m_s"] = {"grid": grid.tolist(), "force_n": np.array(forces).tolist()}
     return out
 
 
@@ -272,7 +287,7 @@ def held_out_learned(
     merged = {**hold.nominal, **values}
     after = [r - p for r, p in zip(hold.residuals, hold.predicted(values), strict=True)]
     learnt = [
-        a - model.force_n(features(d, merged, hold.vehicle))
+        a - model.force_n(features(d, merged, hold.vehicle), headings(d.rotation))
         for d, a in zip(hold.flights, after, strict=True)
     ]
     before = _gap(hold.flights, hold.residuals, hold.noise_var)

@@ -118,6 +118,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     unexplained = result.get("unexplained") or {}
     if unexplained.get("sentence"):
         print(f"unexplained: {unexplained['sentence']}")
+    if unexplained.get("disagreement"):
+        print(f"flights: {unexplained['disagreement']['sentence']}")
     offer = unexplained.get("learned_world")
     if offer:
         state = "corrected_world_learned.yaml" if offer["offered"] else "not written"
