@@ -20,6 +20,7 @@ from simbridge.effects.proximity import WALL_DIRECTIONS, wall_force_n
 from simbridge.effects.uncatalogued import (
     TAKEOFF_HEIGHT_M,
     exponential_gain,
+    exponential_scale,
     outwash_force_n,
 )
 from simbridge.frames import Vec3, xyzw_to_wxyz
@@ -238,7 +239,7 @@ class Simulation:
             self._ge_force[2] = total
         if self._gex is not None:  # the exponential shape, vertical at each hub likewise
             gain, decay, reach = (
-                self._gex.gain,
+                self._gex.gain * self._gex_scale(),
                 self._gex.decay_radii * self._radius,
                 self._gex.ray_length_m,
             )
@@ -261,6 +262,15 @@ class Simulation:
         pb.applyExternalTorque(body, -1, (tx, ty, tz), pb.WORLD_FRAME, cid)
         pb.stepSimulation(cid)
         self._pose = self._read_pose()
+
+    def _gex_scale(self) -> float:
+        """The exponential ground effect's patch and speed fade where they are."""
+        gex = self._gex
+        if gex is None or (gex.patch_radius_m <= 0.0 and gex.fade_speed_m_s <= 0.0):
+            return 1.0
+        (x, y, _), _, _ = self._pose
+        vel, _ = pb.getBaseVelocity(self._body, physicsClientId=self._cid)
+        return exponential_scale(gex, x, y, math.hypot(vel[0], vel[1]))
 
     def _apply_horizontal(
         self,

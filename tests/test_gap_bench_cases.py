@@ -23,7 +23,8 @@ def result(**extra) -> dict:
 def test_the_new_cases_are_flown_in_valid_worlds():
     for name in ("far_ground_effect_lag", "three_effects", "ooc_ground_shape",
                  "ooc_thrust_decay", "ooc_weak_rotor", "ooc_outwash",
-                 "thrust_curve_a", "thrust_curve_b", "thrust_curve_hover"):  # fmt: skip
+                 "thrust_curve_a", "thrust_curve_b", "thrust_curve_hover",
+                 "ooc_ground_fading_with_speed", "ooc_landing_pad"):  # fmt: skip
         case = CASES[name]
         parse_effects([dict(e) for e in real_effects(case)], name)
         assert case.uncatalogued == name.startswith("ooc_")
@@ -100,3 +101,18 @@ def test_a_catalogue_case_meets_its_target_with_the_exact_set_within_ten_percent
     assert scores["summary"]["uncatalogued"]["cases"] == 1
     text = table(scores)
     assert "located missing" in text and "out of the catalogue (1 cases)" in text
+
+
+def test_passes_run_along_x_when_fitting_and_along_y_when_held_out_and_pads_are_placed():
+    from mission.campaigns.gap_flights import PAD_XY_M, PASS_SPEEDS_M_S, bench_mission
+
+    def ends(kind: str, seed: int) -> list[list[float]]:
+        return [wp["position_m"] for wp in bench_mission(kind, seed)["waypoints"]]
+
+    along_x, along_y = ends("passes", 0), ends("passes", 100)
+    assert all(abs(p[0]) == 1.5 and abs(p[1]) <= 0.2 for p in along_x)
+    assert all(abs(p[1]) == 1.5 and abs(p[0]) <= 0.2 for p in along_y)
+    speeds = [wp["speed_m_s"] for wp in bench_mission("passes", 0)["waypoints"]]
+    assert tuple(speeds) == PASS_SPEEDS_M_S
+    on, off = ends("pad", 100)[-1], ends("pad", 1)[-1]  # where each lands
+    assert on[:2] == list(PAD_XY_M) and off[:2] == [-PAD_XY_M[0], PAD_XY_M[1]]

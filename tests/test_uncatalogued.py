@@ -29,6 +29,7 @@ from simbridge.effects.uncatalogued import (
     asymmetric_forces_n,
     exponential_gain,
     exponential_gain_array,
+    exponential_scale,
     outwash_force_n,
     thrust_decay_scale,
 )
@@ -56,6 +57,16 @@ def test_exponential_gain_decays_from_its_gain_at_the_surface():
     h = np.array([0.0, 0.02, 0.1, np.inf])
     expected = [exponential_gain(x, 0.3, 0.05) for x in h]
     assert exponential_gain_array(h, 0.3, 0.05) == pytest.approx(expected)
+
+
+def test_the_exponential_ground_effect_fades_with_speed_and_keeps_to_its_patch():
+    fading = GroundEffectExponentialParams(fade_speed_m_s=0.6)
+    assert exponential_scale(fading, 5.0, 5.0, 0.0) == 1.0
+    assert exponential_scale(fading, 0.0, 0.0, 0.6) == pytest.approx(math.exp(-1.0))
+    pad = GroundEffectExponentialParams(patch_center_m=(0.8, 0.0), patch_radius_m=0.4)
+    assert exponential_scale(pad, 0.9, 0.1, 2.0) == 1.0  # on the pad, no fade asked
+    assert exponential_scale(pad, -0.8, 0.0, 0.0) == 0.0  # the floor around it
+    assert exponential_scale(GroundEffectExponentialParams(), -9.0, 9.0, 9.0) == 1.0
 
 
 def test_thrust_decay_is_linear_in_time_since_takeoff_and_floored():

@@ -6,6 +6,7 @@ told, the diagnosis run blind on them, and its scores: exact-set identification,
 from __future__ import annotations
 
 import hashlib
+import math
 import shutil
 from pathlib import Path
 from typing import Any
@@ -131,6 +132,14 @@ def score(case: Case, result: dict[str, Any]) -> dict[str, Any]:
         "closed_loop": result.get("closed_loop"),
         "false_alarm": bool(reported_set) if not case.truth and not case.uncatalogued else None,
     }
+
+
+def _n(x: float | None, spec: str, scale: float = 1.0, unit: str = "") -> str:
+    """`x * scale` formatted with its unit, or n/a where the selection of cases gives no such
+    figure."""
+    if x is None or not math.isfinite(x):
+        return "n/a".rjust(int(spec.split(".")[0] or 0) + len(unit))
+    return format(x * scale, spec) + unit
 
 
 def _floor(effect: str, truth: dict[str, float]) -> float:
@@ -259,25 +268,30 @@ def table(scores: dict[str, Any]) -> str:
             f"{r['case']:25s} {_mark(r['exact']):5s}  {_mark(r.get('catalogue_target')):5s}"
             f"  {r['force_shrink'] * 100:8.0f}%     {what}"
         )
-    nan = float("nan")
-    lines += ["", "effect               F1 (single)  median param error  coverage95"]
+    effects = ["", "effect               F1 (single)  median param error  coverage95"]
     for e, f in s["f1_single"].items():
+        if f["tp"] + f["fp"] + f["fn"] == 0 and e not in s["per_effect_parameters"]:
+            continue  # no case of this selection holds or names it
         p = s["per_effect_parameters"].get(e, {})
-        lines.append(
+        effects.append(
             f"{e:20s} {f['f1']:6.2f} ({f['tp']}/{f['fp']}/{f['fn']})"
-            f"  {p.get('median_error', nan) * 100:10.1f}%  {p.get('coverage', nan):8.2f}"
+            f"  {_n(p.get('median_error'), '10.1f', 100, '%')}  {_n(p.get('coverage'), '8.2f')}"
         )
+    lines += effects if len(effects) > 2 else []
     lines += [
         "",
-        f"exact-set rate {s['exact_set_rate']:.2f}; median parameter error "
-        f"{s['median_relative_parameter_error'] * 100:.1f}%; coverage {s['coverage95']:.2f}; "
-        f"median held-out force shrink {s['median_force_shrink'] * 100:.0f}%; closed-loop "
-        f"{s['median_closed_loop_shrink'] * 100:.0f}%; false alarms {s['false_alarm_rate']}; "
-        f"unexcited reported not identifiable {s['unexcited_not_identifiable']}; "
-        f"wall {scores.get('wall_s', float('nan')):.0f} s",
+        f"exact-set rate {_n(s['exact_set_rate'], '.2f')}; median parameter error "
+        f"{_n(s['median_relative_parameter_error'], '.1f', 100, '%')}; coverage "
+        f"{_n(s['coverage95'], '.2f')}; median held-out force shrink "
+        f"{_n(s['median_force_shrink'], '.0f', 100, '%')}; closed-loop "
+        f"{_n(s['median_closed_loop_shrink'], '.0f', 100, '%')}; false alarms "
+        f"{s['false_alarm_rate']}; unexcited reported not identifiable "
+        f"{s['unexcited_not_identifiable']}; wall {_n(scores.get('wall_s'), '.0f')} s",
     ]
-    t, u = s.get("catalogue_target_rate", nan), s.get("uncatalogued") or {}
-    lines.append(f"catalogue cases with the exact set and every parameter within 10%: {t:.2f}")
+    t, u = s.get("catalogue_target_rate"), s.get("uncatalogued") or {}
+    lines.append(
+        f"catalogue cases with the exact set and every parameter within 10%: {_n(t, '.2f')}"
+    )
     if u.get("cases"):
         lines.append(
             f"out of the catalogue ({u['cases']} cases): located {u['located']:.2f}; no "

@@ -6,6 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from mission.campaigns.gap_flights import PAD_XY_M
+
 GE = {"name": "ground_effect", "rho": 1.0}
 DRAG = {"name": "rotor_drag"}
 WALL = [{"kind": "wall", "start_m": [-2.0, 0.6], "end_m": [2.0, 0.6], "height_m": 2.0}]
@@ -338,6 +340,42 @@ def _hard_cases(drag: list[float]) -> list[Case]:
             {},
             uncatalogued=True,
             expected_regime=("height_r", "world_x", 6.0),
+        ),
+        # a lift near the ground that fades with horizontal speed (30% of a rotor's thrust at
+        # the surface at rest, none at 1.2 m/s), beside the nominal law: fitted on passes
+        # along x, held out on passes along y
+        Case(
+            "ooc_ground_fading_with_speed",
+            (
+                {
+                    "name": "ground_effect_exponential",
+                    "gain": 0.3,
+                    "decay_radii": 2.0,
+                    "fade_speed_m_s": 0.6,
+                },
+            ),
+            {},
+            kind="passes",
+            uncatalogued=True,
+            expected_regime=("height_r", "vertical", 6.0),
+        ),
+        # a landing pad whose surface lifts 30% more at rest than the floor around it: one
+        # fitting flight low over it, one beside it, the held-out flight over it
+        Case(
+            "ooc_landing_pad",
+            (
+                {
+                    "name": "ground_effect_exponential",
+                    "gain": 0.3,
+                    "decay_radii": 1.5,
+                    "patch_center_m": list(PAD_XY_M),
+                    "patch_radius_m": 0.4,
+                },
+            ),
+            {},
+            kind="pad",
+            uncatalogued=True,
+            expected_regime=("height_r", "vertical", 6.0),
         ),
     ]
 

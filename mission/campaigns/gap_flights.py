@@ -31,7 +31,15 @@ BENCH_NOISE: dict[str, float] = {
 # than the autopilot's model, the vehicle sinks ever slower onto a cushion a few mm above its
 # touchdown height (rho 2.5 against the model's 1: 21 mm after 75 s of landing).
 MAX_FLIGHT_S = 60.0
-KINDS = ("mixed", "hover", "aggressive", "wall", "ceiling")
+KINDS = ("mixed", "hover", "aggressive", "wall", "ceiling", "passes", "pad")
+# `passes`: low passes along x (fitting seeds, under 100) or along y (held-out seeds), at
+# these speeds and this height; `pad`: low holds and the landing over the pad (seeds 0 and
+# 100) or away from it (other seeds)
+PASS_SPEEDS_M_S = (0.3, 0.8, 1.5)
+PASS_HEIGHT_M = 0.06
+PASS_REACH_M = 1.5
+PAD_XY_M = (0.8, 0.0)
+PAD_SEEDS = (0, 100)
 # Identification flights climb and descend faster than a cautious default: the rotor drag's
 # vertical coefficient is seen only through vertical speed, which legs cruising at nearly
 # one height hardly have (0.09 m/s RMS). The limits clip the position loop's error at speed
@@ -97,6 +105,8 @@ def _bench_mission(kind: str, seed: int, ceiling_m: float | None) -> dict[str, A
     if kind == "ceiling" and ceiling_m is None:
         raise ValueError("mission kind 'ceiling': ceiling_m (the ceiling's height) is required")
     rng = random.Random(f"{kind}-{seed}")
+    if kind in ("passes", "pad"):
+        return _low_mission(kind, seed, rng)
     if kind == "hover":
         x, y = rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3)
         wps = [
@@ -143,6 +153,33 @@ def _bench_mission(kind: str, seed: int, ceiling_m: float | None) -> dict[str, A
     wps.append(
         {"position_m": [x, y, 0.04], "hold_s": 1.0, "acceptance_radius_m": 0.02, "timeout_s": 3.0}
     )
+    return {"name": f"{kind} {seed}", "takeoff_altitude_m": 0.3, "waypoints": wps, "land": True}
+
+
+def _low_mission(kind: str, seed: int, rng: random.Random) -> dict[str, Any]:
+    """`passes`: back and forth at PASS_HEIGHT_M along one axis at each of PASS_SPEEDS_M_S,
+    a hold at each end; `pad`: holds low at four points about a place, on the pad for
+    PAD_SEEDS, then the landing there."""
+    low = PASS_HEIGHT_M
+    if kind == "passes":
+        axis = 0 if seed < 100 else 1
+        wps = []
+        for i, speed in enumerate(PASS_SPEEDS_M_S):
+            end = [0.0, 0.0, low]
+            end[axis] = PASS_REACH_M if i % 2 == 0 else -PASS_REACH_M
+            end[1 - axis] = rng.uniform(-0.2, 0.2)
+            wps.append({"position_m": end, "hold_s": 1.0, "acceptance_radius_m": 0.05,
+                        "timeout_s": 8.0, "speed_m_s": speed})  # fmt: skip
+    else:
+        cx, cy = PAD_XY_M if seed in PAD_SEEDS else (-PAD_XY_M[0], PAD_XY_M[1])
+        wps = []
+        for _ in range(4):
+            x, y = cx + rng.uniform(-0.15, 0.15), cy + rng.uniform(-0.15, 0.15)
+            wps.append({"position_m": [x, y, 0.4], "hold_s": 0.0, "acceptance_radius_m": 0.1})
+            wps.append({"position_m": [x, y, low], "hold_s": 1.5, "acceptance_radius_m": 0.02,
+                        "timeout_s": 4.0, "speed_m_s": 0.5})  # fmt: skip
+        wps.append({"position_m": [cx, cy, low], "hold_s": 0.5, "acceptance_radius_m": 0.02,
+                    "timeout_s": 4.0})  # fmt: skip
     return {"name": f"{kind} {seed}", "takeoff_altitude_m": 0.3, "waypoints": wps, "land": True}
 
 

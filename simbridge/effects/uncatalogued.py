@@ -6,6 +6,8 @@ with confidence, and learn them as a residual). The simulator applies them like 
       f_i * gain * exp(-h_i / (decay_radii R))
   with h_i the rotor's height above the surface below it (a ray, as for equation 3.4): finite
   at the surface where equation 3.4 is singular, and with a longer tail for decay_radii > 1.
+  Optionally fading with horizontal speed, exp(-(v_h / fade_speed_m_s)^2), and acting only
+  over a patch of floor (a landing pad of another surface than the floor around it).
 - thrust_decay: C_T falls linearly over the flight (battery sag),
       scale(t) = max(1 - rate_per_s * t, floor)
   with t the time since take-off (`Simulation.time_since_takeoff_s`).
@@ -40,6 +42,32 @@ class GroundEffectExponentialParams:
     ray_length_m: float = param(
         3.0, unit="m", lo=0.1, hi=100.0, doc="beyond this nothing is below (no force)"
     )
+    fade_speed_m_s: float = param(
+        0.0, unit="m/s", lo=0.0, hi=20.0,
+        doc="above 0: the gain falls as exp(-(v_h / fade)^2) with the horizontal speed v_h",
+    )  # fmt: skip
+    patch_center_m: tuple[float, float] = param(
+        [0.0, 0.0], unit="m", lo=-1000.0, hi=1000.0, doc="the patch's centre (x, y)"
+    )
+    patch_radius_m: float = param(
+        0.0, unit="m", lo=0.0, hi=1000.0,
+        doc="above 0: acts only while the centre of mass is over a disc of this radius about "
+        "patch_center_m (a landing pad unlike the floor around it)",
+    )  # fmt: skip
+
+
+def exponential_scale(
+    params: GroundEffectExponentialParams, x_m: float, y_m: float, horizontal_speed_m_s: float
+) -> float:
+    """What multiplies the exponential gain at a position and speed: 0 off the patch (where
+    there is one), the speed's fade (where there is one), else 1."""
+    if params.patch_radius_m > 0.0:
+        cx, cy = params.patch_center_m
+        if math.hypot(x_m - cx, y_m - cy) > params.patch_radius_m:
+            return 0.0
+    if params.fade_speed_m_s > 0.0:
+        return math.exp(-((horizontal_speed_m_s / params.fade_speed_m_s) ** 2))
+    return 1.0
 
 
 def exponential_gain(height_m: float, gain: float, decay_m: float) -> float:
