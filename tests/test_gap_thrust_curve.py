@@ -16,6 +16,7 @@ from learner.gap import fit as gapfit
 from learner.gap import selection
 from learner.gap.candidates import (
     CANDIDATES,
+    implausible_parameters,
     nominal_values,
     rotor_forces_n,
     to_world_effects,
@@ -161,3 +162,16 @@ def test_at_hover_the_curve_is_reported_not_identifiable(tmp_path: Path) -> None
     assert "thrust_curve" not in best.names
     verdict = effect_report(problem, best, excitation, excited, trail, tried)["thrust_curve"]
     assert verdict["status"] == "not identifiable" and "not excited" in verdict["why"]
+
+
+def test_a_thrust_curve_on_its_ranges_edge_within_its_error_is_not_called_unphysical():
+    """The physical range's edge is a margin, not a knife edge: 0.499 with a standard error
+    of 0.02 is as plausible as 0.506 (reruns on the same data flipped between the two);
+    0.45 with the same error is outside it."""
+    cat = dict(CANDIDATES)
+    se = np.array([0.02])
+    assert implausible_parameters("thrust_curve", np.array([0.499]), cat) != []  # no error: edge
+    assert implausible_parameters("thrust_curve", np.array([0.499]), cat, se) == []
+    assert implausible_parameters("thrust_curve", np.array([0.506]), cat, se) == []
+    (far,) = implausible_parameters("thrust_curve", np.array([0.45]), cat, se)
+    assert far["parameter"] == "gamma" and far["range"][0] == pytest.approx(0.5)

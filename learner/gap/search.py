@@ -124,7 +124,7 @@ def set_problems(problem: Problem, f: Fit) -> dict:
     logged acceleration contradicts (learner/gap/bias_or_tilt.py)."""
     cat = problem.catalogue
     hits = {n: bound_hits(n, f.values[n], cat) for n in f.names}
-    implausible = {n: implausible_parameters(n, f.values[n], cat) for n in f.names}
+    implausible = {n: implausible_parameters(n, f.values[n], cat, f.stderr.get(n)) for n in f.names}
     return {
         "at_bound": {n: h for n, h in hits.items() if h},
         "implausible": {n: v for n, v in implausible.items() if v},

@@ -173,7 +173,7 @@ def _alternatives_ruled_out(
         names = tuple(other if n == name else n for n in best.names)
         # on the rows `best` was fitted on: its criterion is compared with this one's
         alt = gapfit.fit(problem, names, max_nfev=60, start=best.values, every_row=best.every_row)
-        bad = implausible_parameters(other, alt.values[other], cat)
+        bad = implausible_parameters(other, alt.values[other], cat, alt.stderr.get(other))
         if bad:
             h = bad[0]
             out[other] = (
@@ -350,7 +350,7 @@ def _mark_disagreeing_flights(
     outside = [
         (flight, bad)
         for flight, f in fits
-        for bad in implausible_parameters(name, f.values[name], cat)
+        for bad in implausible_parameters(name, f.values[name], cat, f.stderr.get(name))
     ]
     if not outside:
         return
