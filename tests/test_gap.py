@@ -18,6 +18,7 @@ import yaml
 from learner.flightlogs.readers import read_log
 from mission.campaigns.gap_bench import RESULTS_FILE, run_bench, run_case
 from mission.campaigns.gap_bench_cases import CASES
+from mission.campaigns.gap_flights import AUTOPILOT_PARAMS, replay_params
 from mission.cli.main import main
 
 
@@ -122,6 +123,16 @@ def test_diagnose_reads_recordings(bench_dir: Path, drag: dict, tmp_path: Path) 
     np.testing.assert_allclose(rec_log.time_s, csv_log.time_s, atol=1e-9)
     for field in ("position_m", "quaternion", "rotor_speeds_rad_s", "acceleration_m_s2"):
         np.testing.assert_allclose(getattr(rec_log, field), getattr(csv_log, field), atol=1e-6)
+    # a replay of a recorded flight flies the parameters that flight set (the bench's among
+    # them), not the ground model's or online learning's
+    flown = dict(p.split("=") for p in replay_params(rec_log.meta))
+    for name, value in (p.split("=") for p in AUTOPILOT_PARAMS):
+        assert float(flown[name]) == float(value), name
+    assert not any(name.startswith("GFX_GE_") for name in flown)
+    assert replay_params(csv_log.meta) == AUTOPILOT_PARAMS  # a log that carries none
+    assert replay_params({"parameters": {"GFX_GE_RHO": 2.0, "MPC_XY_CRUISE": 0.7}}) == (
+        "MPC_XY_CRUISE=0.7",  # the ground model is the replay's own
+    )
     recordings = [str(folder / f"flight{s}.truth.rrd") for s in (0, 1, 100)]
     world = str(folder / "nominal_world.yaml")
     code = main(["gap", "diagnose", *recordings[:2], "--holdout", recordings[2], "--world", world,

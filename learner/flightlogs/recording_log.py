@@ -55,7 +55,8 @@ def read_recording_log(path: Path) -> FlightLog:
     if keep.sum() < 2:
         raise ConfigError(f"{path}: the recording holds no airborne flight")
     q = cols["plots/attitude"][keep]
-    meta = {k: rec.meta[k] for k in ("mission", "world", "vehicle") if k in rec.meta}
+    # the autopilot's parameters too: a replay of the flight flies with them
+    meta = {k: rec.meta[k] for k in ("mission", "world", "vehicle", "parameters") if k in rec.meta}
     return FlightLog(
         Path(path).stem, t[keep], cols["plots/position"][keep], cols["plots/velocity"][keep],
         q / np.linalg.norm(q, axis=1, keepdims=True), cols["plots/rates"][keep], applied[keep],

@@ -20,7 +20,7 @@ from learner.gap.diagnose import STAGES as DIAGNOSE_STAGES
 from learner.gap.diagnose import check_candidates, diagnose
 from learner.gap.report import corrected_world_yaml, figures, write_outputs
 from learner.gap.rollout import shrink, tracking_difference_m
-from mission.campaigns.gap_flights import replay_flight
+from mission.campaigns.gap_flights import replay_flight, replay_params
 from simbridge.config import ConfigError
 from simbridge.vehicle import (
     Vehicle,
@@ -226,17 +226,19 @@ def replay_missions(
     missions = [(log, log.meta.get("mission")) for log in logs]
     if not any(m for _, m in missions):
         return {"status": "skipped", "why": "the logs carry no mission"}
-    # keyed by each world's content: a rerun reuses only the same world's flight
-    keys = {w: hashlib.sha256(w.read_bytes()).hexdigest()[:10] for w in (nominal, corrected)}
     failed, tasks = [], []
     for log, mission in missions:
         if not mission or not Path(mission).exists():
             why = "its log carries no mission" if not mission else f"mission {mission} not found"
             failed.append({"flight": log.name, "world": "nominal", "reason": why})
             continue
+        params = replay_params(log.meta)
         for label, world in (("nominal", nominal), ("corrected", corrected)):
-            name = f"{log.name}-{label}-{keys[world]}.csv"
-            args = (str(mission), str(world), str(out / name), replay_limit_s(log))
+            # keyed by the world's content and the parameters: a rerun reuses only the same
+            # replay's flight
+            key = hashlib.sha256(world.read_bytes() + repr(params).encode()).hexdigest()[:10]
+            name = f"{log.name}-{label}-{key}.csv"
+            args = (str(mission), str(world), str(out / name), replay_limit_s(log), params)
             tasks.append(Task(f"{log.name}/{label}", name, replay_flight, args, (out / name,)))
     records = run_tasks(tasks, out / "results.jsonl", workers, ray_address, False, "replay")
     before, after = [], []

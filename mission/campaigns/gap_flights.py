@@ -197,13 +197,15 @@ def fly_log(
     model: str = "analytic",
     max_flight_s: float = MAX_FLIGHT_S,
     record: bool = False,
+    params: tuple[str, ...] = AUTOPILOT_PARAMS,
 ) -> Path:
     """Fly `mission` in `world` through `fly` (simulator and autopilot processes in lockstep,
     the autopilot arming by itself) and keep its flight log at `out` (reused if present);
     `record`: its rerun recording too, beside it (.rrd). The sensors are ideal: the bench
     scores how the diagnosis names a withheld physical effect, and a noisy, biased IMU
     would be one more effect in every flight (the catalogue's sensor_bias and
-    sensor_latency are withheld as effects of their own)."""
+    sensor_latency are withheld as effects of their own). `params`: the autopilot's
+    parameters (NAME=VALUE), the bench's by default."""
     if out.exists():
         return out
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -216,7 +218,7 @@ def fly_log(
     summary = fly(path, str(world), model, rho=1.0, via_gcs=False, flight_log=raw,
                   record=out.with_suffix(".rrd") if record else False,
                   max_flight_s=max_flight_s, trajectory=track,
-                  autopilot_options=[a for p in AUTOPILOT_PARAMS for a in ("--param", p)],
+                  autopilot_options=[a for p in params for a in ("--param", p)],
                   sim_options=["--ideal-sensors"])  # fmt: skip
     if not summary.get("landed") and not _ended_landing(track):
         raise RuntimeError(f"{out.name}: the flight did not land ({summary.get('ended')})")
@@ -258,8 +260,33 @@ def real_log(
     return write_log(noisy, out)
 
 
-def replay_flight(mission: str, world: str, path: str, max_flight_s: float) -> dict[str, Any]:
+def replay_params(meta: dict[str, Any]) -> tuple[str, ...]:
+    """The autopilot parameters a replay of a log flies: those its flight set apart from the
+    defaults, where the log carries them (groundfx's recordings), but the ground model and
+    online learning (the replay's own: the analytic model at rho 1); else the bench's."""
+    from autopilot.params import SPECS, float32
+
+    logged = meta.get("parameters")
+    if not isinstance(logged, dict):
+        return AUTOPILOT_PARAMS
+    own = ("model", "online", "online_settings")
+    return tuple(
+        f"{name}={float(value):g}"  # recorded as REAL32: compared as the link carries them
+        for name, value in sorted(logged.items())
+        if name in SPECS
+        and SPECS[name].group not in own
+        and float32(float(value)) != float32(SPECS[name].default)
+    )
+
+
+def replay_flight(
+    mission: str,
+    world: str,
+    path: str,
+    max_flight_s: float,
+    params: tuple[str, ...] = AUTOPILOT_PARAMS,
+) -> dict[str, Any]:
     """One replay of a diagnosis (a task of the campaign runner): the flight's log at `path`.
     Here, not beside the diagnosis: a worker that only flies imports no fitting or network."""
-    fly_log(Path(mission), Path(world), Path(path), max_flight_s=max_flight_s)
+    fly_log(Path(mission), Path(world), Path(path), max_flight_s=max_flight_s, params=params)
     return {"path": path}
