@@ -111,3 +111,19 @@ def test_convert_says_where_a_flight_rests(flights: dict) -> None:
                for line in lines)  # fmt: skip
     assert not any("rests on" in line for line in
                    summary_lines(summarize(read_log(flights["held"]), NANO), NANO))  # fmt: skip
+
+
+def test_a_log_in_the_worlds_own_frame_is_left_where_it_is(flights: dict) -> None:
+    """groundfx's recordings and flight logs say their frame is the world's: a flight that
+    seems to rest off the ground (a landing floating millimetres over a strong ground effect
+    reads as one) is not moved, and the others are levelled as before."""
+    from learner.gap.ground_level import level_logs
+    from simbridge.world import load_world
+
+    ours, theirs = (read_log(p) for p in flights["fit"])
+    ours = dataclasses.replace(ours, meta={**ours.meta, "frame": "world"})
+    world = load_world(flights["world"])
+    leveled, notes, applied = level_logs([ours, theirs], world, NANO)
+    assert leveled[0] is ours and ours.name not in applied
+    assert applied[theirs.name] == pytest.approx(FRAME_OFFSET_M, abs=0.001)
+    assert ours.name not in " ".join(notes)

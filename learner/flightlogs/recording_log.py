@@ -57,6 +57,7 @@ def read_recording_log(path: Path) -> FlightLog:
     q = cols["plots/attitude"][keep]
     # the autopilot's parameters too: a replay of the flight flies with them
     meta = {k: rec.meta[k] for k in ("mission", "world", "vehicle", "parameters") if k in rec.meta}
+    meta["frame"] = "world"  # the simulator's: the diagnosis does not look for the ground
     return FlightLog(
         Path(path).stem, t[keep], cols["plots/position"][keep], cols["plots/velocity"][keep],
         q / np.linalg.norm(q, axis=1, keepdims=True), cols["plots/rates"][keep], applied[keep],

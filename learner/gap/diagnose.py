@@ -17,6 +17,7 @@ from learner.gap.corrected import corrected_members, is_sensor
 from learner.gap.disagreement import flights_disagree
 from learner.gap.flightdata import FlightData, describe_left_out, prepare
 from learner.gap.ground_level import level_logs
+from learner.gap.overall import trend_summary
 from learner.gap.plausibility import check as check_plausible
 from learner.gap.regimes import REGIMES, RegimeBin, regime_table, regime_variables, rules
 from learner.gap.residual import (
@@ -30,7 +31,7 @@ from learner.gap.residual_net import STATE_INPUTS
 from learner.gap.rollout import HORIZON_S, rms, rollout_errors, shrink
 from learner.gap.search import forward_search
 from learner.gap.stats import ess_ratio
-from learner.gap.summaries import extra_rules, summaries
+from learner.gap.summaries import explain_trend, extra_rules, summaries
 from learner.gap.torque import torque_gap
 from learner.gap.unexplained import held_out_learned, learn_unexplained
 from learner.gap.verdicts import effect_report, mark_confidence, per_flight_values
@@ -217,6 +218,7 @@ def diagnose(
             all_res, _problem(all_data, nominal, vehicle).predicted(best.values), strict=True
         )
     ]
+    explain_trend(whole, trend_summary(all_data, corrected, vehicle))
     unexplained = dict(left.summary)
     left_table = regime_table(all_data, corrected, vehicle)
     unexplained["where"] = where(left_table)

@@ -25,6 +25,7 @@ from simbridge.world import World
 
 # An offset within this of zero is the log's own noise and smoothing: nothing is shifted.
 OFFSET_TOLERANCE_M = 0.003
+WORLD_FRAME = "world"  # a log's meta `frame`: its z is the simulator world's
 
 
 def resting_offset_m(log: FlightLog, world: World, vehicle: Vehicle) -> float | None:
@@ -59,13 +60,22 @@ def level_logs(
         notes = [f"every log's z is shifted by {0.0 - z_offset_m * 1000:+.1f} mm (--z-offset)"]
         applied = {log.name: z_offset_m for log in logs}
         return [shifted(log, z_offset_m) for log in logs], notes, applied
-    found = {log.name: resting_offset_m(log, world, vehicle) for log in logs}
+    # a log that says its frame is the world's (groundfx's recordings and flight logs) is not
+    # moved: a landing onto a strong ground effect floats millimetres above the ground and
+    # reads as a rest there
+    own_frame = {log.name for log in logs if log.meta.get("frame") == WORLD_FRAME}
+    found = {
+        log.name: resting_offset_m(log, world, vehicle) for log in logs if log.name not in own_frame
+    }
     known = [v for v in found.values() if v is not None]
     if not known or all(abs(v) <= OFFSET_TOLERANCE_M for v in known):
         return logs, [], {}
     common = float(np.median(known))
     out, applied, said = [], {}, []
     for log in logs:
+        if log.name in own_frame:
+            out.append(log)
+            continue
         own = found[log.name]
         offset = own if own is not None else common
         if abs(offset) <= OFFSET_TOLERANCE_M:

@@ -31,6 +31,21 @@ def summaries(
     }
 
 
+def explain_trend(s: dict[str, Any], left: dict[str, Any]) -> None:
+    """Say in the trend's rule when the named effects explain it: what they leave (`left`, a
+    trend_summary of the corrected residual) trends by under a tenth as much, or not
+    significantly. A flight that ends low over the ground gains its ground effect over time,
+    and the two read alike against the nominal world."""
+    trend = s["trend"]
+    slope, after = trend["slope_share_per_min"], left["slope_share_per_min"]
+    trend["after_catalogue_share_per_min"] = after
+    if trend.get("rule") and (not left["significant"] or abs(after) <= 0.1 * abs(slope)):
+        trend["rule"] += (
+            f"; what the effects named leave trends by {after * 100:+.2f}% of the weight per "
+            f"minute: they explain {(1.0 - abs(after) / abs(slope)) * 100:.0f}% of it"
+        )
+
+
 def extra_rules(s: dict[str, Any]) -> list[str]:
     """The summaries' rule sentences, those that cleared their floor."""
     return [

@@ -64,7 +64,9 @@ def _flight_log_writer(request: FlightRequest) -> Any:
     from autopilot.recording.flight_log import FlightLogWriter
 
     mission = str(request.mission.resolve()) if request.mission else None
-    return FlightLogWriter(request.flight_log, {"mission": mission, "vehicle": request.vehicle})
+    # in the simulator world's frame: the diagnosis does not look for the ground
+    meta = {"mission": mission, "vehicle": request.vehicle, "frame": "world"}
+    return FlightLogWriter(request.flight_log, meta)
 
 
 def _version() -> str:
