@@ -87,6 +87,9 @@ def ge_error_metrics(pairs: np.ndarray, hold_times_s: np.ndarray) -> dict[str, f
         "ge_z_hold_rms_error_n": _rms(error[hold]),
         "ge_z_hold_true_n": float(np.mean(pairs[hold, 3])) if hold.any() else None,
         "ge_z_far_rms_error_n": _rms(error[pairs[:, 1] >= FAR_FROM_GROUND_M]),
+        # when the hold ran: what an online model had learnt by then
+        "ge_hold_from_s": float(pairs[hold, 0].min()) if hold.any() else None,
+        "ge_hold_to_s": float(pairs[hold, 0].max()) if hold.any() else None,
     }
 
 

@@ -304,6 +304,7 @@ def _online_lines(summary: dict[str, Any]) -> list[str]:
         f"{summary.get('online_rejected', 0)} rejected{f' ({why})' if why else ''}, "
         f"{held_text}weights version {summary.get('online_version', 0)}{loss}",
         *_ground_lines(summary),
+        *_why_model_error(summary),
         *[f"  online learning: {e}" for e in summary.get("online_errors") or []],
     ]
 
@@ -322,6 +323,36 @@ def _ground_lines(summary: dict[str, Any]) -> list[str]:
     return [
         f"  grounds: {summary.get('online_ground')} in use at the end (known: {known}); "
         + ("; ".join(events) if events else "none created or recalled")
+    ]
+
+
+# over the hold, a model error beyond this share of the true force is explained in a line
+MODEL_ERROR_SHARE = 0.10
+
+
+def _why_model_error(summary: dict[str, Any]) -> list[str]:
+    """composite: why its model was more than MODEL_ERROR_SHARE off over the hold, where it
+    was: when its ground came in against when the hold ran."""
+    error, true = summary.get("ge_z_hold_rms_error_n"), summary.get("ge_z_hold_true_n")
+    start, end = summary.get("ge_hold_from_s"), summary.get("ge_hold_to_s")
+    if summary.get("online_method") != "composite" or None in (error, true, start, end):
+        return []
+    if error <= MODEL_ERROR_SHARE * abs(true):
+        return []
+    share = f"{error / abs(true) * 100:.0f}% of the true force over the hold"
+    came = [e for e in summary.get("online_ground_events") or [] if e["t_s"] <= end]
+    held = f"the hold ran {start:.1f} to {end:.1f} s"
+    if not came:
+        ground = summary.get("online_ground")
+        return [f"  model error: {share}: no ground learnt or recalled by then ({held}): {ground}"]
+    last = came[-1]
+    if last["t_s"] <= start:
+        since = f"{last['ground']} in use from {last['t_s']:.1f} s"
+        return [f"  model error: {share}, {since} ({held})"]
+    return [
+        f"  model error: {share}: {last['ground']} came in at {last['t_s']:.1f} s, "
+        f"{last['t_s'] - start:.1f} s into the hold ({held}); until then the hold was flown on "
+        "the ground in use before it"
     ]
 
 

@@ -178,3 +178,21 @@ def test_flights_with_composite_do_no_harm_at_the_training_rho_and_adapt_at_rho2
     assert created["t_s"] > 5.0 and learnt["online_near_surface_s"] is not None
     assert learnt["online_ground"] == created["ground"] == "learnt-1"
     assert "learnt-1 created at" in describe({**learnt, "simulator": "", "ended": "landed"})
+
+
+def test_a_flight_whose_model_stayed_off_over_the_hold_says_why():
+    """Beyond a tenth of the true force over the hold, `fly` says when the learnt ground
+    came in against when the hold ran; within it, nothing."""
+    from mission.fly import _why_model_error
+
+    summary = {
+        "online_method": "composite", "online_ground": "learnt-1",
+        "ge_z_hold_rms_error_n": 0.0235, "ge_z_hold_true_n": 0.1643,
+        "ge_hold_from_s": 19.5, "ge_hold_to_s": 22.5,
+        "online_ground_events": [{"ground": "learnt-1", "event": "created", "t_s": 20.9}],
+    }  # fmt: skip
+    (line,) = _why_model_error(summary)
+    assert "14% of the true force over the hold: learnt-1 came in at 20.9 s, 1.4 s into" in line
+    assert _why_model_error({**summary, "ge_z_hold_rms_error_n": 0.015}) == []
+    (none,) = _why_model_error({**summary, "online_ground_events": [], "online_ground": "rho1"})
+    assert "no ground learnt or recalled by then" in none and none.endswith("rho1")
