@@ -165,7 +165,7 @@ def learn_unexplained(
     removed = removed_n2(parts)
     structure = has_structure(gain, removed, margin)
     carriers = input_losses(x_all, y_all, x_test, y_test, inputs) if structure else None
-    inputs = (carriers or {}).get("inputs", [])
+    groups = (carriers or {}).get("inputs", [])
     summary: dict[str, Any] = {
         "share": float(share),
         "gap_before_n": before_gap,
@@ -177,9 +177,10 @@ def learn_unexplained(
         "structure": structure,
         "significant": bool(structure and share >= SHARE_MIN),
         "explained": not structure,
-        "inputs": inputs,
-        "carried_by": carried_by(inputs),
-        "sentence": sentence(share, gain, structure, inputs if structure else None, where),
+        "inputs": groups,
+        "carried_by": carried_by(groups),
+        "network_inputs": list(model.features),  # those that varied in training
+        "sentence": sentence(share, gain, structure, groups if structure else None, where),
         "learned_world": learned_world(structure, gain, where),
         "shape": partial_dependence(model, np.concatenate(xs)),
     }
