@@ -292,3 +292,17 @@ def test_no_figure_is_printed_as_nan() -> None:
     data = json_safe({"a": [np.float64("nan"), 1.0], "b": {"c": math.inf, "d": np.int64(3)}})
     assert data == {"a": [None, 1.0], "b": {"c": None, "d": 3}}
     json.dumps(data, allow_nan=False)
+
+
+def test_the_summary_gives_the_replays_figure_and_warns_where_the_corrected_world_flies_worse():
+    from mission.cli.gap import closed_loop_line
+
+    flown = {"status": "flown", "flights": 1, "before_m": 0.0073, "after_m": 0.0050,
+             "shrink": 0.31, "failed": []}  # fmt: skip
+    line = closed_loop_line(flown)
+    assert line is not None and "7.3 mm -> 5.0 mm, shrink 31%" in line
+    assert "further from the logged flights" not in line
+    worse = closed_loop_line({**flown, "after_m": 0.011, "shrink": -0.5})
+    assert worse is not None and "shrink -50%" in worse
+    assert "the corrected world flies further from the logged flights" in worse
+    assert closed_loop_line({"status": "skipped", "why": "not asked for"}) is None

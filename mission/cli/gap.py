@@ -125,6 +125,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         state = "corrected_world_learned.yaml" if offer["offered"] else "not written"
         print(f"learnt world: {state}: {offer['why']}")
     # the ending a reader looks for: the gaps before and after, what is left, where to read on
+    line = closed_loop_line(result.get("closed_loop"))
+    if line:
+        print(line)
     print(f"force gap: {_gap(g['force_rms_n'], 1e3, 'mN')}")
     if g.get("torque_rms_n_m"):
         print(f"torque gap: {_gap(g['torque_rms_n_m'], 1e6, 'uN m')}")
@@ -133,6 +136,22 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
               "systematic force gap")  # fmt: skip
     print(f"report: {args.out / 'report.md'}")
     return 0
+
+
+def closed_loop_line(closed: dict[str, Any] | None) -> str | None:
+    """The replays' figure, where they flew, and a warning where the corrected world flies
+    the held-out missions further from the logged flights than the nominal world does."""
+    from learner.gap.report import closed_loop_sentence
+
+    if not closed or closed.get("status") != "flown":
+        return None  # skipped or failed: a note says why
+    line = str(closed_loop_sentence(closed))
+    if (closed.get("shrink") or 0.0) < 0.0:
+        line += (
+            "; the corrected world flies further from the logged flights than the nominal "
+            "one: its effects do not carry into closed loop as fitted"
+        )
+    return line
 
 
 def _pct(share: float | None) -> str:
