@@ -57,13 +57,14 @@ def flights_disagree(
     most beyond their spread, as a record with a sentence; None where they agree (or fewer
     than two flights share a bin)."""
     edges = REGIMES["height_r"][2]
+    heights = [d.height_m / vehicle.rotor_radius_m for d in flights]
+    vertical = [r[:, 2] / vehicle.weight_n for r in residuals]
     tests = []
     for k in range(len(edges) - 1):
         per_flight = {}
-        for d, r in zip(flights, residuals, strict=True):
-            h = d.height_m / vehicle.rotor_radius_m
+        for d, h, v in zip(flights, heights, vertical, strict=True):
             rows = (h >= edges[k]) & (h < edges[k + 1])
-            m = _flight_mean(d, r[:, 2] / vehicle.weight_n, rows)
+            m = _flight_mean(d, v, rows)
             if m is not None:
                 per_flight[d.name] = m
         if len(per_flight) < 2:

@@ -6,7 +6,6 @@ told, the diagnosis run blind on them, and its scores: exact-set identification,
 from __future__ import annotations
 
 import hashlib
-import math
 import shutil
 from pathlib import Path
 from typing import Any
@@ -15,6 +14,7 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
+from learner.gap.numbers import finite
 from mission.campaigns.gap_bench_cases import Case, real_effects
 from mission.campaigns.gap_bench_ooc import summary as ooc_summary
 from mission.campaigns.gap_bench_ooc import verdict, verdict_text
@@ -137,7 +137,7 @@ def score(case: Case, result: dict[str, Any]) -> dict[str, Any]:
 def _n(x: float | None, spec: str, scale: float = 1.0, unit: str = "") -> str:
     """`x * scale` formatted with its unit, or n/a where the selection of cases gives no such
     figure."""
-    if x is None or not math.isfinite(x):
+    if not finite(x):
         return "n/a".rjust(int(spec.split(".")[0] or 0) + len(unit))
     return format(x * scale, spec) + unit
 

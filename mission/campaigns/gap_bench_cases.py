@@ -34,6 +34,15 @@ class Case:
     expected_regime: tuple[Any, ...] = ()
 
 
+def _exponential_ground_case(name: str, kind: str, **params: Any) -> Case:
+    """A lift near the ground of the exponential shape outside the catalogue (30% of a
+    rotor's thrust at the surface), beside the nominal law, with `params` (its decay, a fade
+    with speed, a patch), flown on `kind` missions; located below 6 rotor radii."""
+    hidden = {"name": "ground_effect_exponential", "gain": 0.3, **params}
+    return Case(name, (hidden,), {}, kind=kind, uncatalogued=True,
+                expected_regime=("height_r", "vertical", 6.0))  # fmt: skip
+
+
 def _cases() -> list[Case]:
     k = (2.2e-5, 2.2e-5, 1.0e-5)
     c: list[Case] = []
@@ -344,38 +353,17 @@ def _hard_cases(drag: list[float]) -> list[Case]:
         # a lift near the ground that fades with horizontal speed (30% of a rotor's thrust at
         # the surface at rest, none at 1.2 m/s), beside the nominal law: fitted on passes
         # along x, held out on passes along y
-        Case(
-            "ooc_ground_fading_with_speed",
-            (
-                {
-                    "name": "ground_effect_exponential",
-                    "gain": 0.3,
-                    "decay_radii": 2.0,
-                    "fade_speed_m_s": 0.6,
-                },
-            ),
-            {},
-            kind="passes",
-            uncatalogued=True,
-            expected_regime=("height_r", "vertical", 6.0),
+        _exponential_ground_case(
+            "ooc_ground_fading_with_speed", "passes", decay_radii=2.0, fade_speed_m_s=0.6
         ),
         # a landing pad whose surface lifts 30% more at rest than the floor around it: one
         # fitting flight low over it, one beside it, the held-out flight over it
-        Case(
+        _exponential_ground_case(
             "ooc_landing_pad",
-            (
-                {
-                    "name": "ground_effect_exponential",
-                    "gain": 0.3,
-                    "decay_radii": 1.5,
-                    "patch_center_m": list(PAD_XY_M),
-                    "patch_radius_m": 0.4,
-                },
-            ),
-            {},
-            kind="pad",
-            uncatalogued=True,
-            expected_regime=("height_r", "vertical", 6.0),
+            "pad",
+            decay_radii=1.5,
+            patch_center_m=list(PAD_XY_M),
+            patch_radius_m=0.4,
         ),
     ]
 
