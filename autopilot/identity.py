@@ -183,6 +183,8 @@ FIRMWARE: dict[str, Equivalent] = {
     "MPC_Z_V_AUTO_UP": Equivalent("MPC_Z_V_AUTO_UP 3 m/s", "WPNAV_SPEED_UP 250 cm/s"),
     "MPC_Z_V_AUTO_DN": Equivalent("MPC_Z_V_AUTO_DN 1.5 m/s", "WPNAV_SPEED_DN 150 cm/s"),
     "MPC_LAND_SPEED": Equivalent("MPC_LAND_SPEED 0.7 m/s", "LAND_SPEED 50 cm/s"),
+    "MPC_LAND_ALT1": Equivalent("MPC_LAND_ALT1 10 m", "LAND_ALT_LOW 1000 cm (one step)"),
+    "MPC_LAND_ALT2": Equivalent("MPC_LAND_ALT2 5 m", "LAND_ALT_LOW 1000 cm"),
     "NAV_ACC_RAD": Equivalent("NAV_ACC_RAD 10 m", "WPNAV_RADIUS 200 cm"),
     "RTL_RETURN_ALT": Equivalent("RTL_RETURN_ALT 60 m", "RTL_ALT 1500 cm"),
 }

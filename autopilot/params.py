@@ -93,6 +93,8 @@ NAMES: dict[str, tuple[str, str]] = {
     "MPC_Z_V_AUTO_UP": ("commander", "climb_speed_m_s"),
     "MPC_Z_V_AUTO_DN": ("commander", "descent_speed_m_s"),
     "MPC_LAND_SPEED": ("commander", "land_speed_m_s"),
+    "MPC_LAND_ALT1": ("commander", "land_blend_from_m"),
+    "MPC_LAND_ALT2": ("commander", "land_slow_below_m"),
     "RTL_RETURN_ALT": ("commander", "return_altitude_m"),
     "GFX_TD_MARGIN": ("commander", "touchdown_margin_m"),
     "GFX_TD_TIME": ("commander", "touchdown_s"),

@@ -43,9 +43,11 @@ def wait_for(
     what: str,
     process: subprocess.Popen | None = None,
     timeout_s: float = 300.0,
+    interval_s: float = 0.1,
 ) -> None:
     """Wait for a state, not for a time: poll `condition` until it holds. The timeout only
-    ends a test that would otherwise hang; `process` must stay alive meanwhile."""
+    ends a test that would otherwise hang; `process` must stay alive meanwhile. A costly
+    `condition` (a screenshot) is polled less often (`interval_s`)."""
     deadline = time.monotonic() + timeout_s
     while not condition():
         if process is not None and process.poll() is not None:
@@ -53,7 +55,7 @@ def wait_for(
             raise AssertionError(f"the process ended before {what}: {out}\n{err}")
         if time.monotonic() > deadline:
             raise AssertionError(f"not {what} within {timeout_s:g} s")
-        time.sleep(0.1)
+        time.sleep(interval_s)
 
 
 def recorded_s(path: Path) -> float:

@@ -63,7 +63,8 @@ def test_a_mission_from_arming_to_disarm():
     c = step(c, 9.012, (3.0, 0.0, 1.0))
     assert c.state.phase == Phase.LANDING
     c = step(c, 10.012, (3.0, 0.0, 0.95))
-    assert c.setpoint.position_m[2] == pytest.approx(0.9, abs=1e-3)  # sinking at 0.1 m/s
+    # sinking at the descent speed (0.5 m/s) while above MPC_LAND_ALT1 (0.5 m)
+    assert c.setpoint.position_m[2] == pytest.approx(0.5, abs=3e-3)
     c = step(c, 20.0, (3.0, 0.0, REST), REST + 0.001)
     assert c.state.phase == Phase.LANDING and c.armed  # down, not yet for long enough
     c = step(c, 20.1, (3.0, 0.0, REST), REST)
@@ -157,3 +158,26 @@ def test_a_take_off_mode_chosen_in_the_air_climbs_to_the_altitude_then_holds():
     assert c.setpoint.position_m == pytest.approx((0.4, 0.0, 1.0126))  # back up, not home
     c = step(c, 9.0, (0.4, 0.0, 1.0126))
     assert c.state.mode == FlightMode.HOLD and "take-off complete: holding in hold" in c.events
+
+
+def test_a_landing_descends_fast_high_up_and_at_the_landing_speed_near_the_ground():
+    """PX4's MPC_LAND_ALT1/ALT2: the descent speed above 0.5 m, the landing speed below
+    0.2 m, a speed falling with height between, never a jump; from 1 m down in about 4 s."""
+    import numpy as np
+
+    from autopilot.commander.landing_profile import LandingProfile
+
+    profile = LandingProfile(fast_m_s=0.5, slow_m_s=0.1, alt1_m=0.5, alt2_m=0.2)
+    dt = 1e-3
+    heights = np.array([profile.height_m(1.0, t) for t in np.arange(0.0, 6.0, dt)])
+    speeds = -np.diff(heights) / dt
+    assert speeds[heights[1:] > 0.5].min() == pytest.approx(0.5)
+    assert speeds[heights[1:] < 0.2] == pytest.approx(0.1, abs=1e-5)
+    assert np.abs(np.diff(speeds)).max() < 1e-3  # continuous
+    for h in (0.6, 0.35, 0.1):  # the closed form follows the speed it states
+        t = np.argmin(np.abs(heights - h))
+        assert speeds[t] == pytest.approx(profile.speed_m_s(heights[t]), abs=1e-3)
+    assert np.argmax(heights < 0.0126) * dt == pytest.approx(4.08, abs=0.01)
+    # one speed, or the two heights the wrong way round: still a descent that ends
+    assert LandingProfile(0.1, 0.1, 0.5, 0.2).height_m(1.0, 2.0) == pytest.approx(0.8)
+    assert LandingProfile(0.5, 0.1, 0.1, 0.2).height_m(1.0, 2.0) == pytest.approx(0.16)

@@ -42,6 +42,11 @@ def test_hover_at_one_metre_holds_within_a_centimetre(tmp_path):
     assert settled.size > 1000
     assert np.max(np.abs(z[settled] - 1.0)) < 0.01
     assert np.max(np.hypot(x[settled], y[settled])) < 0.01
+    # the landing: fast high up, at MPC_LAND_SPEED (0.1 m/s) over the last 10 cm
+    landing = np.flatnonzero(mode == 5)
+    assert t[landing[-1]] - t[landing[0]] < 5.0
+    near = landing[log[landing, 8] < 0.1]
+    assert np.max(-log[near, 6]) < 0.13 and summary["touchdown_speed_m_s"] < 0.13
 
 
 def test_holding_3_cm_over_rho_2_ground_analytic_holds_within_5_mm_and_lands_softly():

@@ -445,7 +445,7 @@ def test_the_web_viewer_shows_the_hold_and_the_model_error_without_a_click(flown
         pytest.skip("no Chromium to drive (Debian: apt-get install chromium)")
     web, grpc = _free_port(), _free_port()
     review = _serve_web(flown[0]["recording"], web, grpc)
-    width, height = 1600, 1000
+    width, height = 1280, 720  # a small laptop screen: the software renderer draws fewer pixels
     upper_right = (width // 2, 0, width, int(height * 0.6))
     seen: dict[str, dict] = {}
 
@@ -465,7 +465,8 @@ def test_the_web_viewer_shows_the_hold_and_the_model_error_without_a_click(flown
                 f"http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc}%2Fproxy"
             )
             try:
-                wait_for(both_drawn, "the hold and the model error drawn", review, 240)
+                # a screenshot a second: each one has the software renderer draw the page
+                wait_for(both_drawn, "the hold and the model error drawn", review, 240, 1.0)
             except AssertionError as err:
                 raise AssertionError(f"{err}; last seen: {seen}") from None
     finally:

@@ -21,6 +21,7 @@ from enum import StrEnum
 from typing import NamedTuple
 
 from autopilot.commander.commander_params import CommanderParams
+from autopilot.commander.landing_profile import LandingProfile
 from autopilot.commander.mission_items import PlanStep
 from autopilot.commander.offboard import Target, Track, follow
 from autopilot.types import FlightMode, Setpoint
@@ -56,6 +57,7 @@ class CommanderState:
     arrived_s: float | None = None  # when the setpoint reached the target
     reached_s: float | None = None  # when the vehicle reached the target
     landing_from_m: Vec3 | None = None
+    landing_height_m: float | None = None  # above resting when the landing began
     down_since_s: float | None = None
     touchdown_s: float | None = None
     takeoff_altitude_m: float | None = None  # a take-off command's own altitude
@@ -180,6 +182,7 @@ def start_landing(
         Phase.LANDING,
         time_s,
         landing_from_m=(xy[0], xy[1], position[2]),
+        landing_height_m=None,  # the first landing step measures it
         down_since_s=None,
         target_m=None,
     )
@@ -442,19 +445,33 @@ def _progress(state: CommanderState, now: Now) -> CommanderState:
     return state
 
 
+def landing_profile(params: CommanderParams) -> LandingProfile:
+    return LandingProfile(
+        params.descent_speed_m_s,
+        params.land_speed_m_s,
+        params.land_blend_from_m,
+        params.land_slow_below_m,
+    )
+
+
 def _land(state: CommanderState, params: CommanderParams, now: Now, events: list[str]) -> Command:
-    """LANDING: a setpoint sinking at the landing speed until the vehicle is down, never
-    further than `landing_floor_m` below where the vehicle would rest."""
+    """LANDING: a setpoint sinking (at the descent speed high up, the landing speed near the
+    ground: `landing_profile`) until the vehicle is down, never further than
+    `landing_floor_m` below where the vehicle would rest."""
     time_s, height_m, resting_height_m = now.time_s, now.height_m, now.resting_height_m
     start = state.landing_from_m or now.position_m
-    sink = params.land_speed_m_s
+    if state.landing_height_m is None:
+        state = state.evolve(landing_height_m=max(height_m - resting_height_m, 0.0))
+    profile = landing_profile(params)
+    h0 = state.landing_height_m or 0.0
+    h = profile.height_m(h0, time_s - state.since_s)
     floor = now.position_m[2] - (height_m - resting_height_m) - params.landing_floor_m
-    z = start[2] - sink * (time_s - state.since_s)
+    z = start[2] - (h0 - h)
     sinking = z > floor
     target = (start[0], start[1], max(z, floor))
     setpoint = Setpoint(
         target,
-        velocity_m_s=(0.0, 0.0, -sink if sinking else 0.0),
+        velocity_m_s=(0.0, 0.0, -profile.speed_m_s(h) if sinking else 0.0),
         yaw_rad=math.radians(state.yaw_deg),
     )
     if height_m <= resting_height_m + params.touchdown_margin_m or now.ground_contact:

@@ -30,8 +30,16 @@ class CommanderParams:
         0.5, unit="m/s", lo=0.01, hi=10.0, doc="vertical speed down (not landing)"
     )
     land_speed_m_s: float = param(
-        0.1, unit="m/s", lo=0.01, hi=3.0, doc="descent rate of the landing setpoint"
-    )
+        0.1, unit="m/s", lo=0.01, hi=3.0, doc="descent rate of the landing setpoint near the "
+        "ground",
+    )  # fmt: skip
+    land_blend_from_m: float = param(
+        0.5, unit="m", lo=0.0, hi=100.0, doc="a landing slows from the descent speed below this "
+        "height above the ground",
+    )  # fmt: skip
+    land_slow_below_m: float = param(
+        0.2, unit="m", lo=0.0, hi=100.0, doc="... to the landing speed below this one",
+    )  # fmt: skip
     return_altitude_m: float = param(
         1.0, unit="m", lo=0.0, hi=100.0, doc="lowest altitude above home to return at"
     )
