@@ -196,3 +196,37 @@ def test_a_flight_whose_model_stayed_off_over_the_hold_says_why():
     assert _why_model_error({**summary, "ge_z_hold_rms_error_n": 0.015}) == []
     (none,) = _why_model_error({**summary, "online_ground_events": [], "online_ground": "rho1"})
     assert "no ground learnt or recalled by then" in none and none.endswith("rho1")
+
+
+def test_a_tour_reports_grounds_created_recalls_and_returns_against_first_visits():
+    """`groundfx learn tour`'s figures from its flights' summaries: grounds created against
+    the distinct grounds flown, and each return's recall delay, changes and hold against the
+    first visit; a ground it cannot fly is refused naming the field."""
+    from mission.campaigns.online_tour import describe_tours, leg_figures, tour_verdicts
+    from tests.helpers import groundfx_in_process
+
+    def flight(ground: str, events: list, adapted: int, hold_m: float) -> dict:
+        return {"ground": ground, "landed": True, "online_ground_events": events,
+                "online_near_surface_s": 10.0, "online_adapted": adapted,
+                "online_ground": events[-1]["ground"] if events else "rho1",
+                "hold_z_rms_error_m": hold_m, "ge_z_hold_rms_error_n": 0.004,
+                "ge_z_hold_true_n": 0.16}  # fmt: skip
+
+    created = [{"t_s": 14.0, "event": "created", "ground": "learnt-1"}]
+    recalled = [{"t_s": 11.5, "event": "recalled", "ground": "learnt-1"}]
+    legs = [
+        leg_figures(flight("rho1", [], 0, 0.0004)),
+        leg_figures(flight("rho2", created, 9, 0.0009)),
+        leg_figures(flight("rho2", recalled, 1, 0.0005)),
+    ]
+    assert legs[1]["created"] == ["learnt-1"] and legs[2]["recall_after_s"] == 1.5
+    figures = tour_verdicts(legs)
+    assert figures["distinct_grounds"] == 2 and figures["grounds_created"] == 1
+    (back,) = figures["returns"]
+    assert (back["published"], back["published_first_visit"]) == (1, 9)
+    lines = describe_tours({"grounds": ["rho1", "rho2", "rho2"], "controller": "default",
+                            "tours": [{"seed": 0, "legs": legs, **figures}]})  # fmt: skip
+    assert "back at rho2: recalled 1.50 s after reaching the surface, 1 changes published " \
+           "(first visit 9), hold 0.50 mm (first visit 0.90)" in lines  # fmt: skip
+    refused = groundfx_in_process("learn", "tour", "--grounds", "rho1,grass")
+    assert refused.returncode == 2 and "--grounds: 'grass' is not a ground" in refused.stderr

@@ -127,7 +127,7 @@ def cmd_learn(args: argparse.Namespace) -> int:
         return 0
     if args.action == "basis":
         return _cmd_basis(args)
-    if args.action in ("memory", "online-eval"):
+    if args.action in ("memory", "online-eval", "tour"):
         from mission.cli.online import cmd_online_learn
 
         return cmd_online_learn(args)

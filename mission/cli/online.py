@@ -1,7 +1,7 @@
 """The command-line side of online learning: what `--online METHOD` and its companions (the
 flight request's options, autopilot/request.py) ask of the autopilot (with a ground station,
 GFX_OL_METHOD and the other GFX_OL_* parameters do the same in flight), and `groundfx learn
-memory|online-eval`."""
+memory|online-eval|tour`."""
 
 from __future__ import annotations
 
@@ -74,6 +74,32 @@ def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) ->
     )
     e.add_argument("--json", action="store_true")
     e.set_defaults(func=func)
+    t = learn.add_parser(
+        "tour", help="composite's memory: chained flights over grounds, each from the model the "
+        "one before saved",
+    )  # fmt: skip
+    t.add_argument(
+        "--grounds", default="rho1,rho2,box,rho1,rho2",
+        help="the tour: rhoX (a flat ground of rho_sim X) or box (the obstacles world's box), "
+        "comma-separated (default: rho1,rho2,box,rho1,rho2)",
+    )  # fmt: skip
+    t.add_argument("--trials", type=int, default=3, help="seeded tours (default: 3)")
+    t.add_argument("--seed", type=int, default=0, help="first seed")
+    t.add_argument(
+        "--basis", default="grounds", help="the basis model composite adapts (default: grounds)"
+    )
+    t.add_argument(
+        "--controller", choices=("thesis", "default"), default="default",
+        help="default: the autopilot's PD with its integral (default); thesis: the thesis's PD",
+    )  # fmt: skip
+    t.add_argument(
+        "--workers", type=int, default=None, help="tours at once (default: one per core)"
+    )
+    t.add_argument("--out", type=Path, default=Path("logs/tour"), help="flights and tour.json")
+    t.add_argument(
+        "--param", action="append", default=[], metavar="NAME=VALUE", help="e.g. GFX_OL_LR=0.01"
+    )
+    t.set_defaults(func=func)
 
 
 def cmd_online_learn(args: argparse.Namespace) -> int:
@@ -87,6 +113,8 @@ def cmd_online_learn(args: argparse.Namespace) -> int:
         memory.header["sources"] = [str(p) for p in args.data]
         print(save_memory(args.out, memory))
         return 0
+    if args.action == "tour":
+        return _tour(args)
     import json
     import os
 
@@ -126,4 +154,20 @@ def cmd_online_learn(args: argparse.Namespace) -> int:
     )
     if args.json:
         print(json.dumps(result))
+    return 0
+
+
+def _tour(args: argparse.Namespace) -> int:
+    import os
+
+    from mission.campaigns.online_tour import parse_grounds, run_tour
+
+    grounds = parse_grounds(args.grounds)
+    if not 1 <= args.trials <= 100:
+        raise ConfigError(f"--trials: {args.trials} is outside the allowed range [1, 100]")
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    if not 1 <= workers <= 64:
+        raise ConfigError(f"--workers: {workers} is outside the allowed range [1, 64]")
+    run_tour(args.trials, args.seed, grounds, args.out, args.basis, args.controller,
+             tuple(args.param), workers)  # fmt: skip
     return 0
