@@ -155,6 +155,10 @@ def _specs() -> dict[str, ParamSpec]:
 
 SPECS = _specs()
 ORDER = tuple(sorted(SPECS))  # param_index order
+# Parameters added since recordings carried their flight's parameters, with the value that
+# flies as the autopilot did before them (a replay of an older recording sets it): landings
+# sank at MPC_LAND_SPEED from any height.
+BEFORE_ADDED: dict[str, float] = {"MPC_LAND_ALT1": 100.0, "MPC_LAND_ALT2": 100.0}
 
 
 def float32(value: float) -> float:

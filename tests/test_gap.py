@@ -131,8 +131,13 @@ def test_diagnose_reads_recordings(bench_dir: Path, drag: dict, tmp_path: Path) 
     assert not any(name.startswith("GFX_GE_") for name in flown)
     assert replay_params(csv_log.meta) == AUTOPILOT_PARAMS  # a log that carries none
     assert replay_params({"parameters": {"GFX_GE_RHO": 2.0, "MPC_XY_CRUISE": 0.7}}) == (
-        "MPC_XY_CRUISE=0.7",  # the ground model is the replay's own
+        # a recording from before the landing's two heights landed slowly from any height;
+        # the ground model is the replay's own
+        "MPC_LAND_ALT1=100",
+        "MPC_LAND_ALT2=100",
+        "MPC_XY_CRUISE=0.7",
     )
+    assert "MPC_LAND_ALT1" not in flown  # today's recordings carry it, at its default
     recordings = [str(folder / f"flight{s}.truth.rrd") for s in (0, 1, 100)]
     world = str(folder / "nominal_world.yaml")
     code = main(["gap", "diagnose", *recordings[:2], "--holdout", recordings[2], "--world", world,

@@ -264,11 +264,13 @@ def replay_params(meta: dict[str, Any]) -> tuple[str, ...]:
     """The autopilot parameters a replay of a log flies: those its flight set apart from the
     defaults, where the log carries them (groundfx's recordings), but the ground model and
     online learning (the replay's own: the analytic model at rho 1); else the bench's."""
-    from autopilot.params import SPECS, float32
+    from autopilot.params import BEFORE_ADDED, SPECS, float32
 
     logged = meta.get("parameters")
     if not isinstance(logged, dict):
         return AUTOPILOT_PARAMS
+    # a recording from before a parameter existed flew as its old value does
+    logged = {**BEFORE_ADDED, **logged}
     own = ("model", "online", "online_settings")
     return tuple(
         f"{name}={float(value):g}"  # recorded as REAL32: compared as the link carries them
