@@ -137,7 +137,7 @@ def test_diagnose_reads_recordings(bench_dir: Path, drag: dict, tmp_path: Path) 
         "MPC_LAND_ALT2=100",
         "MPC_XY_CRUISE=0.7",
     )
-    assert "MPC_LAND_ALT1" not in flown  # today's recordings carry it, at its default
+    assert "MPC_LAND_ALT1" not in flown  # a recording that carries it, at its default
     recordings = [str(folder / f"flight{s}.truth.rrd") for s in (0, 1, 100)]
     world = str(folder / "nominal_world.yaml")
     code = main(["gap", "diagnose", *recordings[:2], "--holdout", recordings[2], "--world", world,
