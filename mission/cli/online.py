@@ -50,16 +50,7 @@ def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) ->
     e.add_argument("--network", default="rho1", help="the offline network (default: rho1)")
     e.add_argument("--hold-s", type=float, default=10.0, help="hold 3 cm above ground this long")
     e.add_argument("--no-remember", action="store_true", help="skip experiment 4.4")
-    e.add_argument(
-        "--basis", default="grounds", help="the basis model composite adapts (default: grounds)"
-    )
-    e.add_argument(
-        "--controller",
-        choices=("thesis", "default"),
-        default="thesis",
-        help="thesis: the thesis's position PD, where a model error shows in the hold "
-        "(default); default: the autopilot's PD with its integral",
-    )
+    _composite_options(e, "thesis")
     where = e.add_mutually_exclusive_group()
     where.add_argument(
         "--workers", type=int, default=None, help="flights at once (default: one per core)"
@@ -69,9 +60,6 @@ def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) ->
         help="run the flights as tasks on a Ray cluster (auto, HOST:PORT, ray://HOST:PORT; "
         "local: start one here); needs the ray extra",
     )  # fmt: skip
-    e.add_argument(
-        "--param", action="append", default=[], metavar="NAME=VALUE", help="e.g. GFX_OL_LR=0.01"
-    )
     e.add_argument("--json", action="store_true")
     e.set_defaults(func=func)
     t = learn.add_parser(
@@ -85,21 +73,40 @@ def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) ->
     )  # fmt: skip
     t.add_argument("--trials", type=int, default=3, help="seeded tours (default: 3)")
     t.add_argument("--seed", type=int, default=0, help="first seed")
-    t.add_argument(
-        "--basis", default="grounds", help="the basis model composite adapts (default: grounds)"
-    )
-    t.add_argument(
-        "--controller", choices=("thesis", "default"), default="default",
-        help="default: the autopilot's PD with its integral (default); thesis: the thesis's PD",
-    )  # fmt: skip
+    _composite_options(t, "default")
     t.add_argument(
         "--workers", type=int, default=None, help="tours at once (default: one per core)"
     )
     t.add_argument("--out", type=Path, default=Path("logs/tour"), help="flights and tour.json")
-    t.add_argument(
+    t.set_defaults(func=func)
+
+
+def _composite_options(parser: argparse.ArgumentParser, controller: str) -> None:
+    """--basis, --controller (its default `controller`) and --param, as the online
+    evaluation and the tour take them."""
+    parser.add_argument(
+        "--basis", default="grounds", help="the basis model composite adapts (default: grounds)"
+    )
+    parser.add_argument(
+        "--controller",
+        choices=("thesis", "default"),
+        default=controller,
+        help=f"thesis: the thesis's position PD, where a model error shows in the hold; "
+        f"default: the autopilot's PD with its integral (default: {controller})",
+    )
+    parser.add_argument(
         "--param", action="append", default=[], metavar="NAME=VALUE", help="e.g. GFX_OL_LR=0.01"
     )
-    t.set_defaults(func=func)
+
+
+def _workers(args: argparse.Namespace) -> int:
+    """--workers, or one per core."""
+    import os
+
+    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+    if not 1 <= workers <= 64:
+        raise ConfigError(f"--workers: {workers} is outside the allowed range [1, 64]")
+    return workers
 
 
 def cmd_online_learn(args: argparse.Namespace) -> int:
@@ -116,7 +123,6 @@ def cmd_online_learn(args: argparse.Namespace) -> int:
     if args.action == "tour":
         return _tour(args)
     import json
-    import os
 
     from mission.campaigns.online_eval import run_online_eval
 
@@ -134,9 +140,7 @@ def cmd_online_learn(args: argparse.Namespace) -> int:
         raise ConfigError(f"--rho: each rho must be in (0, 50], got {args.rho!r}")
     if args.trials < 1:
         raise ConfigError(f"--trials: {args.trials} must be at least 1")
-    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-    if not 1 <= workers <= 64:
-        raise ConfigError(f"--workers: {workers} is outside the allowed range [1, 64]")
+    workers = _workers(args)
     if not 1.0 <= args.hold_s <= 120.0:
         raise ConfigError(f"--hold-s: {args.hold_s:g} is outside the allowed range [1, 120] s")
     result = run_online_eval(
@@ -158,16 +162,12 @@ def cmd_online_learn(args: argparse.Namespace) -> int:
 
 
 def _tour(args: argparse.Namespace) -> int:
-    import os
-
     from mission.campaigns.online_tour import parse_grounds, run_tour
 
     grounds = parse_grounds(args.grounds)
     if not 1 <= args.trials <= 100:
         raise ConfigError(f"--trials: {args.trials} is outside the allowed range [1, 100]")
-    workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-    if not 1 <= workers <= 64:
-        raise ConfigError(f"--workers: {workers} is outside the allowed range [1, 64]")
+    workers = _workers(args)
     run_tour(args.trials, args.seed, grounds, args.out, args.basis, args.controller,
              tuple(args.param), workers)  # fmt: skip
     return 0
