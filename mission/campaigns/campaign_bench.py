@@ -5,7 +5,6 @@ the same run)."""
 from __future__ import annotations
 
 import os
-import resource
 import tempfile
 import time
 from pathlib import Path
@@ -60,20 +59,14 @@ def _run(flights: int, workers: int, rho: float, allowed: list[int]) -> tuple[fl
                      outputs=(folder / f"flight{i}.npz",))
                 for i in range(flights)
             ]  # fmt: skip
-            cpu0 = _children_cpu_s()
             t0 = time.perf_counter()
             records = run_tasks(tasks, folder / "results.jsonl", workers=workers, progress=False)
             wall_s = time.perf_counter() - t0
-            # the pool's processes and their flights' simulators, reaped when it closed
-            cores = (_children_cpu_s() - cpu0) / wall_s
+            # each flight's task and its simulator and autopilot
+            cores = sum(r["cpu_s"] for r in records.values()) / wall_s
     finally:
         os.sched_setaffinity(0, before)
     failed = sum("error" in r for r in records.values())
     if failed:
         raise RuntimeError(f"{failed} of {flights} flights failed with {workers} workers")
     return flights / wall_s * 60.0, cores
-
-
-def _children_cpu_s() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime

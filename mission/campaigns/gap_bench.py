@@ -170,7 +170,8 @@ def run_bench(
     tasks = [
         # its folder (flights already flown in it are reused) goes with it and comes back
         Task(case.name, _key(case, replay, source), run_case, (case, out, replay),
-             outputs=(out / case.name,), input_folders=(out / case.name,))
+             outputs=(out / case.name,), input_folders=(out / case.name,),
+             imports=("mission.campaigns.gap_diagnosis",))
         for case in cases
     ]  # fmt: skip
 

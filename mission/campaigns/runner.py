@@ -16,11 +16,13 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import resource
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from multiprocessing import get_context
+from multiprocessing.context import BaseContext
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +42,9 @@ class Task:
     # campaign started) and the folders it reads beyond the files its arguments name
     outputs: tuple[str | Path, ...] = ()
     input_folders: tuple[str | Path, ...] = ()
+    # modules its function imports when it runs: on a local pool, imported once by the fork
+    # server the workers start from, not by every worker
+    imports: tuple[str, ...] = ()
 
 
 PACKAGES = ("autopilot", "simbridge", "learner", "mission")
@@ -113,20 +118,63 @@ def ray_init(address: str, workers: int | None = None) -> None:
 def _run(task: Task) -> dict[str, Any]:
     """A task in a worker: its record, or the error that ended it (a figure, not the end of
     the campaign)."""
+    cpu_s = _cpu_s()
     try:
         record = task.fn(*task.args)
     except Exception as err:
         record = {"error": f"{type(err).__name__}: {err}"}
-    return {**record, "id": task.id, "key": task.key}
+    # its own and its processes' (a flight's simulator and autopilot, reaped by then)
+    return {**record, "id": task.id, "key": task.key, "cpu_s": _cpu_s() - cpu_s}
+
+
+def _cpu_s() -> float:
+    own, children = (
+        resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
+    )
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+@dataclass(frozen=True)
+class Here:
+    """What a pool worker takes from the process that submitted its task: a worker forked
+    from the fork server would otherwise have the server's, from when it started."""
+
+    cwd: str
+    env: dict[str, str]
+    cpus: frozenset[int]  # the cores it may run on (`bench campaign` holds a pool to one)
+
+    @staticmethod
+    def now() -> Here:
+        return Here(os.getcwd(), dict(os.environ), frozenset(os.sched_getaffinity(0)))
+
+
+def _run_here(task: Task, here: Here) -> dict[str, Any]:
+    os.chdir(here.cwd)
+    if os.environ != here.env:
+        os.environ.clear()
+        os.environ.update(here.env)
+    os.sched_setaffinity(0, here.cpus)
+    return _run(task)
+
+
+def _pool_context(tasks: list[Task]) -> BaseContext:
+    """Workers forked from a fork server: a fresh interpreter of its own, with no threads or
+    sockets of this process, that has imported the tasks' modules (torch, scipy, rerun for a
+    diagnosis) once; each worker starts from it in milliseconds, not seconds."""
+    context = get_context("forkserver")
+    # takes effect when the server starts: at this process's first pool
+    modules = {__name__} | {t.fn.__module__ for t in tasks} | {m for t in tasks for m in t.imports}
+    context.set_forkserver_preload(sorted(modules))
+    return context
 
 
 def _pool(tasks: list[Task], workers: int) -> Iterator[dict[str, Any]]:
     """Tasks on a local pool; the tasks of a pool whose worker died go to a fresh pool once."""
     left, retried = {t.id: t for t in tasks}, False
+    here = Here.now()
     while left:
-        # spawn: a fresh interpreter per worker, no inherited threads or sockets
-        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            pending = {pool.submit(_run, t): t.id for t in left.values()}
+        with ProcessPoolExecutor(workers, mp_context=_pool_context(tasks)) as pool:
+            pending = {pool.submit(_run_here, t, here): t.id for t in left.values()}
             try:
                 while pending:
                     done, _ = wait(pending, return_when=FIRST_COMPLETED)
