@@ -83,7 +83,8 @@ class Vehicle:
 @pytest.fixture
 def vehicle() -> Iterator[Callable[..., Vehicle]]:
     """Start `groundfx sim` and `groundfx autopilot --identity ID --out URL [OPTIONS]`; both
-    are ended (terminated, then killed if need be) at teardown."""
+    are ended (terminated, then killed if need be) at teardown. It records only where
+    `--record PATH` is among the options."""
     started: list[subprocess.Popen[str]] = []
 
     def start(identity: str, out_url: str, *options: str, speedup: str = SPEEDUP) -> Vehicle:
@@ -92,7 +93,8 @@ def vehicle() -> Iterator[Callable[..., Vehicle]]:
         command = [
             sys.executable, "-m", "mission.cli", "autopilot",
             "--sim", f"tcp:127.0.0.1:{port}", "--identity", identity, "--params-file", "none",
-            "--out", out_url, "--exit-after-landing", "--json", *options,
+            "--out", out_url, "--exit-after-landing", "--json",
+            *(() if "--record" in options else ("--no-record",)), *options,
         ]  # fmt: skip
         autopilot = subprocess.Popen(
             command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO

@@ -33,7 +33,7 @@ def autopilot(port: int, mission: str, *extra: str) -> subprocess.Popen[str]:
 
 
 def test_hover_at_one_metre_holds_within_a_centimetre(tmp_path):
-    summary = fly(EXAMPLES / "hover.yaml", trajectory=tmp_path / "t.npz")
+    summary = fly(EXAMPLES / "hover.yaml", trajectory=tmp_path / "t.npz", record=False)
     assert summary["landed"]
     log = np.load(tmp_path / "t.npz")["log"]
     t, x, y, z, mode = log[:, 0], log[:, 1], log[:, 2], log[:, 3], log[:, 9]
@@ -52,7 +52,9 @@ def test_hover_at_one_metre_holds_within_a_centimetre(tmp_path):
 def test_holding_3_cm_over_rho_2_ground_analytic_holds_within_5_mm_and_lands_softly():
     # the reproducible path (ground-station flights: test_gcs.py); `none` against analytic
     # and neural on the same ground: tests/test_learner.py's closed-loop trials
-    analytic = fly(EXAMPLES / "low_hover.yaml", world="rho2", model="analytic", via_gcs=False)
+    analytic = fly(
+        EXAMPLES / "low_hover.yaml", world="rho2", model="analytic", via_gcs=False, record=False
+    )
     assert analytic["landed"] and analytic["rho"] == 2.0
     # on its estimator and realistic sensors (1 mm motion capture): a 0.2 mm height error
     # is 5 mN of ground effect there, so the largest error is about twice the RMS
@@ -62,7 +64,12 @@ def test_holding_3_cm_over_rho_2_ground_analytic_holds_within_5_mm_and_lands_sof
 
 
 def test_landing_on_a_box_measures_the_ground_effect_to_the_box(tmp_path):
-    summary = fly(EXAMPLES / "land_on_box.yaml", world="obstacles", trajectory=tmp_path / "t.npz")
+    summary = fly(
+        EXAMPLES / "land_on_box.yaml",
+        world="obstacles",
+        trajectory=tmp_path / "t.npz",
+        record=False,
+    )
     assert summary["landed"] and summary["landing_error_m"] < 0.02
     assert summary["hold_z_rms_error_m"] < 0.005  # 3 cm above the box top
     log = np.load(tmp_path / "t.npz")["log"]
@@ -72,8 +79,8 @@ def test_landing_on_a_box_measures_the_ground_effect_to_the_box(tmp_path):
 
 def test_the_same_mission_twice_flies_the_same_trajectory():
     # without a ground station: arming at a fixed simulated time makes runs reproducible
-    first = fly(EXAMPLES / "demo.yaml", world="rho2", via_gcs=False)
-    second = fly(EXAMPLES / "demo.yaml", world="rho2", via_gcs=False)
+    first = fly(EXAMPLES / "demo.yaml", world="rho2", via_gcs=False, record=False)
+    second = fly(EXAMPLES / "demo.yaml", world="rho2", via_gcs=False, record=False)
     assert first["landed"] and first["steps"] == second["steps"]
     assert first["trajectory_sha256"] == second["trajectory_sha256"]
 

@@ -47,7 +47,8 @@ def vehicle(
     *options: str, speedup: str = "max", key: bytes | None = None
 ) -> Iterator[tuple[GroundStation, subprocess.Popen[str], int]]:
     """A simulator and an autopilot sending to a pymavlink ground station; also listening on
-    a udpin port (the third value) for other senders."""
+    a udpin port (the third value) for other senders. It records only where `--record PATH`
+    is among the options."""
     station = GroundStation("udpin:127.0.0.1:0", signing_key=key)
     listen_port = free_udp_port()
     sim, port = start_sim("default", speedup=speedup)
@@ -57,6 +58,7 @@ def vehicle(
         "--out",
         f"udpin:127.0.0.1:{listen_port}",
         "--json",
+        *(() if "--record" in options else ("--no-record",)),
         *options,
     )
     autopilot = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
