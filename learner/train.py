@@ -37,6 +37,7 @@ from learner.network import (
     import_weights,
     spectral_norms,
 )
+from learner.plot_axes import plain_log_axis
 from simbridge.config import param
 
 
@@ -202,6 +203,7 @@ def write_outputs(result: TrainResult, out: Path) -> dict[str, Path]:
     fig, ax = plt.subplots(figsize=(7, 4))
     ax.semilogy(result.train_loss, label="training")
     ax.semilogy(result.validation_loss, label="validation")
+    plain_log_axis(ax.yaxis)
     ax.axvline(result.metrics["best_epoch"], color="0.6", ls="--", lw=0.8, label="kept")
     ax.set_xlabel("epoch")
     ax.set_ylabel("MSE (standardised targets)")

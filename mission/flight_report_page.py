@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from autopilot.metrics import runs, settled_halves
+from learner.plot_axes import plain_log_axis
 from mission.flight_report import (
     QUESTIONS,
     Series,
@@ -138,6 +139,7 @@ def _learner(ax: Any, a: dict[str, Any], s: Series) -> None:
         ax.set_yticks([])
         return
     ax.semilogy(s.loss_time_s, np.maximum(s.loss, 1e-12), ".", color="#d62728", label="loss")
+    plain_log_axis(ax.yaxis)
     if len(s.version_time_s):
         twin = ax.twinx()
         twin.step(s.version_time_s, s.version, where="post", color="#1f77b4", label="version")

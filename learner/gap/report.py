@@ -16,6 +16,7 @@ from learner.gap.numbers import NO_GAP, fig, json_safe, pct
 from learner.gap.regimes import describe_range
 from learner.gap.report_unexplained import WORLD_FILE, markdown_section, write_learned
 from learner.gap.summaries import markdown_section as summaries_section
+from learner.plot_axes import plain_log_axis
 
 
 def corrected_world_yaml(nominal_yaml: str, diagnosis: Diagnosis) -> str:
@@ -175,6 +176,7 @@ def _plots(diagnosis: Diagnosis, out: Path) -> dict[str, Path]:
     axes[0].set(
         xscale="log", xlabel="height above the surface (m)", ylabel="vertical residual (mN)"
     )
+    plain_log_axis(axes[0].xaxis, subs=(1.0, 2.0, 5.0))  # 0.01, 0.02, 0.05, 0.1 m, ...
     axes[1].set(xlabel="horizontal speed (m/s)", ylabel="residual along the velocity (mN)")
     axes[0].set_title("red: nominal world, blue: corrected")
     fig.tight_layout()

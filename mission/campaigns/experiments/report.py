@@ -13,6 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from learner.plot_axes import plain_log_axis
 from learner.stats import compare, describe, verdict
 from mission.campaigns.experiments.definitions import MEASURES, PRIMARY, Experiment, Trial
 
@@ -111,6 +112,7 @@ def plot_experiment(
         ax.set_ylabel(f"{label} [{unit}]")
         if log:
             ax.set_yscale("log")
+            plain_log_axis(ax.yaxis)
         ax.grid(alpha=0.3)
     fig.suptitle(f"{experiment.key} {experiment.title} (mean, 95% CI, trials)", fontsize=10)
     fig.tight_layout()
