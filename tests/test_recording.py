@@ -275,11 +275,11 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _serve_web(recording: str, web: int, grpc: int) -> subprocess.Popen:
+def _serve_web(recording: str, web: int, data: int) -> subprocess.Popen:
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     command = [sys.executable, "-m", "mission.cli", "review", recording, "--web"]
     return subprocess.Popen(
-        [*command, "--web-port", str(web), "--grpc-port", str(grpc)],
+        [*command, "--web-port", str(web), "--data-port", str(data)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -300,6 +300,15 @@ def _wait_for_page(web: int, review: subprocess.Popen, timeout_s: float = 30.0) 
     return page
 
 
+def _viewer_address(review: subprocess.Popen) -> str:
+    """The address `groundfx review --web` prints for a browser to open."""
+    assert review.stdout is not None
+    for line in review.stdout:
+        if "web viewer at " in line:
+            return line.split("web viewer at ", 1)[1].split()[0]
+    raise AssertionError(f"no address printed: {review.communicate()}")
+
+
 def _stop_review(review: subprocess.Popen) -> str:
     review.send_signal(signal.SIGINT)  # Ctrl-C: the viewer's server ignores SIGTERM
     try:
@@ -311,8 +320,8 @@ def _stop_review(review: subprocess.Popen) -> str:
 
 
 def test_review_web_serves_the_viewer_on_a_headless_machine(flown):
-    web, grpc = _free_port(), _free_port()
-    review = _serve_web(flown[0]["recording"], web, grpc)
+    web, data = _free_port(), _free_port()
+    review = _serve_web(flown[0]["recording"], web, data)
     try:
         page = _wait_for_page(web, review)
         assert review.poll() is None, review.communicate()
@@ -443,8 +452,8 @@ def test_the_web_viewer_shows_the_hold_and_the_model_error_without_a_click(flown
     binary = find_chromium()
     if binary is None:
         pytest.skip("no Chromium to drive (Debian: apt-get install chromium)")
-    web, grpc = _free_port(), _free_port()
-    review = _serve_web(flown[0]["recording"], web, grpc)
+    web, data = _free_port(), _free_port()
+    review = _serve_web(flown[0]["recording"], web, data)
     width, height = 1280, 720  # a small laptop screen: the software renderer draws fewer pixels
     upper_right = (width // 2, 0, width, int(height * 0.6))
     seen: dict[str, dict] = {}
@@ -461,9 +470,7 @@ def test_the_web_viewer_shows_the_hold_and_the_model_error_without_a_click(flown
     try:
         _wait_for_page(web, review)
         with Chromium(binary, width, height) as browser:
-            browser.open(
-                f"http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc}%2Fproxy"
-            )
+            browser.open(_viewer_address(review))  # as printed
             try:
                 # a screenshot a second: each one has the software renderer draw the page
                 wait_for(both_drawn, "the hold and the model error drawn", review, 240, 1.0)

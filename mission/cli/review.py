@@ -1,19 +1,29 @@
 """`groundfx review RECORDING [--web | --report]`: open a flight recording in the rerun viewer,
 or write its one-page report (`mission/flight_report.py`).
 
-Native: the `rerun` viewer of the installed rerun-sdk opens the file (it needs a display).
-`--web`: the same viewer serves itself over HTTP instead (`rerun --serve-web`), for a headless
-machine; open the printed address in a browser (through an SSH tunnel of both ports if the
-machine is remote). The viewer replaces this process: Ctrl-C ends it.
+Native: the `rerun` viewer of the installed rerun-sdk opens the file (it needs a display);
+it replaces this process. `--web`: the same viewer serves itself over HTTP instead
+(`rerun --serve-web`), for a headless machine, and this process serves the recording beside
+it, over HTTP on the data port, for the viewer in the browser to load; open the printed
+address (through an SSH tunnel of both ports if the machine is remote). Ctrl-C ends both.
+Given the file to serve itself, rerun's server keeps a core busy for as long as it runs (a
+polling loop in its gRPC server, rerun-io/rerun#10944); empty, it idles.
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
 import os
 import shutil
+import signal
+import subprocess
 import sys
+import threading
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
+from typing import Any
+from urllib.parse import quote
 
 from simbridge.config import ConfigError
 
@@ -54,35 +64,77 @@ def check_recording(path: Path) -> str:
     return f"{path}: {span}{state}"
 
 
-def viewer_args(path: Path, web: bool, web_port: int, grpc_port: int) -> list[str]:
-    if web:
-        # --serve-web hosts the viewer without trying to open a browser (--web-viewer would)
-        return [
-            str(path),
-            "--serve-web",
-            "--web-viewer-port",
-            str(web_port),
-            "--port",
-            str(grpc_port),
-        ]
-    return [str(path)]
-
-
-def review(path: Path, web: bool = False, web_port: int = 9090, grpc_port: int = 9876) -> int:
+def review(path: Path, web: bool = False, web_port: int = 9090, data_port: int = 9876) -> int:
     print(f"groundfx review: {check_recording(path)}", flush=True)
-    if not web and sys.platform.startswith("linux"):
+    if web:
+        return serve_web(path, web_port, data_port)
+    if sys.platform.startswith("linux"):
         if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
             raise ConfigError("no display for the native viewer; use --web to serve the web viewer")
-    if web:
-        print(
-            f"groundfx review: web viewer at http://127.0.0.1:{web_port}/?url=rerun%2Bhttp%3A%2F"
-            f"%2F127.0.0.1%3A{grpc_port}%2Fproxy (Ctrl-C ends it)",
-            flush=True,
-        )
     binary = rerun_binary()
     # the viewer takes over this process, and with it Ctrl-C and the exit code
-    os.execv(binary, [binary, *viewer_args(path, web, web_port, grpc_port)])
+    os.execv(binary, [binary, str(path)])
     return 0  # not reached
+
+
+def serve_web(path: Path, web_port: int, data_port: int) -> int:
+    """The web viewer's server, and the recording over HTTP beside it; until Ctrl-C."""
+    files = _file_server(path, data_port)
+    threading.Thread(target=files.serve_forever, daemon=True).start()
+    # --serve-web hosts the viewer without trying to open a browser (--web-viewer would); its
+    # gRPC server, which nothing here uses, on a port of the system's choosing
+    viewer = subprocess.Popen(
+        [rerun_binary(), "--serve-web", "--web-viewer-port", str(web_port), "--port", "0"],
+        process_group=0,  # a terminal's Ctrl-C reaches this process, which passes it on
+        preexec_fn=_killed_with_parent,
+    )
+    data = quote(f"http://127.0.0.1:{data_port}/{path.name}", safe="")
+    print(
+        f"groundfx review: web viewer at http://127.0.0.1:{web_port}/?url={data} (Ctrl-C ends it)",
+        flush=True,
+    )
+    try:
+        return viewer.wait()
+    except KeyboardInterrupt:
+        viewer.send_signal(signal.SIGINT)  # the viewer's server ignores SIGTERM
+        return viewer.wait()
+    finally:
+        files.shutdown()
+        if viewer.poll() is None:
+            viewer.kill()
+            viewer.wait()
+
+
+def _file_server(path: Path, port: int) -> ThreadingHTTPServer:
+    """An HTTP server of the one file, to any origin (the viewer's page is on another port)."""
+    name = f"/{path.name}"
+
+    class File(BaseHTTPRequestHandler):
+        def do_GET(self) -> None:  # the name http.server calls
+            if self.path.split("?", 1)[0] != name:
+                self.send_error(404)
+                return
+            data = path.read_bytes()
+            self.send_response(200)
+            self.send_header("Content-Type", "application/octet-stream")
+            self.send_header("Content-Length", str(len(data)))
+            self.send_header("Access-Control-Allow-Origin", "*")
+            self.end_headers()
+            self.wfile.write(data)
+
+        def log_message(self, *args: Any) -> None:  # the viewer's own log is enough
+            pass
+
+    try:
+        return ThreadingHTTPServer(("127.0.0.1", port), File)  # a tunnel reaches it
+    except OSError as err:
+        raise ConfigError(f"--data-port {port}: {err.strerror}") from None
+
+
+def _killed_with_parent() -> None:
+    """The viewer's server ends with this process, however it ends (Linux)."""
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
 
 
 def add_review_parser(sub: argparse._SubParsersAction) -> None:
@@ -92,7 +144,14 @@ def add_review_parser(sub: argparse._SubParsersAction) -> None:
         "--web", action="store_true", help="serve the web viewer instead (headless machines)"
     )
     p.add_argument("--web-port", type=int, default=9090, help="HTTP port of --web (default: 9090)")
-    p.add_argument("--grpc-port", type=int, default=9876, help="data port of --web (default: 9876)")
+    p.add_argument(
+        "--data-port",
+        "--grpc-port",
+        dest="data_port",
+        type=int,
+        default=9876,
+        help="the port --web serves the recording on, for the viewer to load (default: 9876)",
+    )
     p.add_argument(
         "--report",
         action="store_true",
@@ -118,4 +177,4 @@ def cmd_review(args: argparse.Namespace) -> int:
         png, answers = write_flight_report(args.recording)
         print(f"groundfx review: report {png} (answers: {answers})")
         return 0
-    return review(args.recording, args.web, args.web_port, args.grpc_port)
+    return review(args.recording, args.web, args.web_port, args.data_port)
