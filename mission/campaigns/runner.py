@@ -141,11 +141,14 @@ class Here:
 
     cwd: str
     env: dict[str, str]
-    cpus: frozenset[int]  # the cores it may run on (`bench campaign` holds a pool to one)
+    # the cores it may run on, where the system says (Linux); `bench campaign` holds a pool
+    # to one
+    cpus: frozenset[int] | None
 
     @staticmethod
     def now() -> Here:
-        return Here(os.getcwd(), dict(os.environ), frozenset(os.sched_getaffinity(0)))
+        cpus = frozenset(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+        return Here(os.getcwd(), dict(os.environ), cpus)
 
 
 def _run_here(task: Task, here: Here) -> dict[str, Any]:
@@ -153,7 +156,8 @@ def _run_here(task: Task, here: Here) -> dict[str, Any]:
     if os.environ != here.env:
         os.environ.clear()
         os.environ.update(here.env)
-    os.sched_setaffinity(0, here.cpus)
+    if here.cpus is not None:
+        os.sched_setaffinity(0, here.cpus)
     return _run(task)
 
 
