@@ -9,6 +9,7 @@ import argparse
 from pathlib import Path
 
 from learner.online.names import METHODS, method_number
+from mission.cli.options import add_campaign_options, positive_int
 from simbridge.config import ConfigError
 
 
@@ -51,15 +52,7 @@ def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) ->
     e.add_argument("--hold-s", type=float, default=10.0, help="hold 3 cm above ground this long")
     e.add_argument("--no-remember", action="store_true", help="skip experiment 4.4")
     _composite_options(e, "thesis")
-    where = e.add_mutually_exclusive_group()
-    where.add_argument(
-        "--workers", type=int, default=None, help="flights at once (default: one per core)"
-    )
-    where.add_argument(
-        "--ray", metavar="ADDRESS",
-        help="run the flights as tasks on a Ray cluster (auto, HOST:PORT, ray://HOST:PORT; "
-        "local: start one here); needs the ray extra",
-    )  # fmt: skip
+    add_campaign_options(e, "flights", progress=False)
     e.add_argument("--json", action="store_true")
     e.set_defaults(func=func)
     t = learn.add_parser(
@@ -75,7 +68,7 @@ def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) ->
     t.add_argument("--seed", type=int, default=0, help="first seed")
     _composite_options(t, "default")
     t.add_argument(
-        "--workers", type=int, default=None, help="tours at once (default: one per core)"
+        "--workers", type=positive_int, help="local processes running the tours (default: cores)"
     )
     t.add_argument("--out", type=Path, default=Path("logs/tour"), help="flights and tour.json")
     t.set_defaults(func=func)
@@ -100,11 +93,11 @@ def _composite_options(parser: argparse.ArgumentParser, controller: str) -> None
 
 
 def _workers(args: argparse.Namespace) -> int:
-    """--workers, or one per core."""
+    """--workers (at least 1 by its type), or one per core."""
     import os
 
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-    if not 1 <= workers <= 64:
+    if workers > 64:
         raise ConfigError(f"--workers: {workers} is outside the allowed range [1, 64]")
     return workers
 
