@@ -23,6 +23,7 @@ from mission.recordings import default_recording_path, recording_label
 from simbridge.config import ConfigError
 from simbridge.launch import finish, spawn_local_sim
 from simbridge.world import World, load_world, resolve_world_path
+from simbridge.zygote import popen
 
 
 def default_rho(world_name: str) -> float:
@@ -101,6 +102,14 @@ def _flight_request(
 
 
 LINK_RETRIES = 1  # a lost simulator link is flown again once
+# what `groundfx autopilot` imports before its first step, for a zygote to import once
+AUTOPILOT_IMPORTS = (
+    "mission.cli",
+    "mission.cli.main",
+    "mission.cli.autopilot",
+    "autopilot.request",
+    "autopilot.runner",
+)
 
 
 def fly(
@@ -224,7 +233,9 @@ def _start(command: list[str], sim: subprocess.Popen[str]) -> subprocess.Popen[s
     autopilot runs ends the flight at once (one that failed before the autopilot connected
     would leave it retrying its connection; one that died mid-flight closed its socket,
     which the autopilot sees itself)."""
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process = popen(
+        command, AUTOPILOT_IMPORTS, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
 
     def watch() -> None:
         if sim.wait() != 0 and process.poll() is None:

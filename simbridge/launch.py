@@ -9,7 +9,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from simbridge.zygote import popen
+
 LISTENING = "groundfx sim: listening on tcp:"  # the line that gives the port
+# what `groundfx sim` imports before its first step, for a zygote to import once
+SIM_IMPORTS = ("mission.cli", "mission.cli.main", "mission.cli.sim", "simbridge.server")
 
 
 class SimProcessError(RuntimeError):
@@ -52,10 +56,11 @@ def start_sim(
     cmd = sim_command(
         world, speedup=speedup, start=start, extra=extra, lockstep_start=lockstep_start
     )
-    options = supervised_options() if supervised else {}
-    proc = subprocess.Popen(
-        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **options
-    )
+    pipes: dict[str, Any] = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, "text": True}
+    if supervised:
+        proc = subprocess.Popen(cmd, **pipes, **supervised_options())
+    else:
+        proc = popen(cmd, SIM_IMPORTS, **pipes)
     assert proc.stdout is not None
     line = proc.stdout.readline()
     if not line.startswith(LISTENING):
@@ -79,7 +84,7 @@ def spawn_local_sim(
     cmd = sim_command(
         world, speedup=speedup, start=start, extra=extra, lockstep_start=True, unix_path=unix_path
     )
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return popen(cmd, SIM_IMPORTS, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
 def finish(proc: subprocess.Popen[str], timeout_s: float = 10.0) -> str:

@@ -151,16 +151,23 @@ def test_a_simulator_that_fails_at_start_ends_fly_with_its_reason(tmp_path):
 
 
 def simulators_started_by_this_test() -> list[int]:
-    """This process's children that are a `groundfx sim` (Linux's /proc)."""
-    pid = os.getpid()
-    children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+    """The `groundfx sim` processes this process started (Linux's /proc): among its children,
+    and its zygote's (`simbridge/zygote.py`: a forked child takes its command as its title)."""
     found = []
-    for child in children:
-        with contextlib.suppress(OSError):
-            argv = Path(f"/proc/{child}/cmdline").read_bytes().split(b"\0")
-            if b"sim" in argv and b"autopilot" not in argv:
-                found.append(int(child))
+    for child in _children(os.getpid()):
+        for pid in (child, *_children(child)):
+            with contextlib.suppress(OSError):
+                argv = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").split()
+                if b"sim" in argv and b"autopilot" not in argv:
+                    found.append(pid)
     return found
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
 
 
 def test_a_campaign_flight_whose_simulator_dies_is_flown_again_to_the_same_trajectory(tmp_path):

@@ -1,0 +1,292 @@
+"""Flight processes started warm. A flight is two processes (`groundfx sim` and `groundfx
+autopilot`), and a fresh interpreter spends about 0.4 CPU-s importing what each runs before
+its first step. A zygote, one interpreter per launching process, imports that once and forks
+a child for each `python -m MODULE ...` asked of it: a real process with its own pid, pipes,
+process group, title and exit status, that runs MODULE as `python -m` would.
+
+`popen(args, preload, ...)` is `subprocess.Popen(args, ...)` for such a command; `preload`
+names what the command imports, which the zygote imports before it forks (once). Anything
+else, or GROUNDFX_WARM_START=0, is started as asked. The zygote reports each child's exit
+status over a socket of its own; it ends when the process that started it exits."""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import importlib
+import io
+import json
+import os
+import runpy
+import select
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import setproctitle
+
+WARM_ENV = "GROUNDFX_WARM_START"
+_STATUS = struct.Struct("q")
+_MAX_REQUEST = 1 << 20
+
+
+def popen(args: Sequence[str], preload: Sequence[str], **options: Any) -> subprocess.Popen[str]:
+    """`subprocess.Popen(args, **options)`, forked from this process's zygote where `args` is
+    `[sys.executable, "-m", MODULE, ...]` and the options are pipes, `env`, `cwd`, `text`
+    and `process_group` only. `preload`: the modules the command imports (none that starts a
+    thread: a zygote holds none when it forks)."""
+    args = list(args)
+    if _warm_start_possible(args, options):
+        return WarmProcess(_zygote(), args, tuple(preload), **options)
+    return subprocess.Popen(args, **options)
+
+
+def _warm_start_possible(args: list[str], options: dict[str, Any]) -> bool:
+    allowed = {"stdin", "stdout", "stderr", "text", "env", "cwd", "process_group", "bufsize"}
+    return (
+        os.environ.get(WARM_ENV, "1") != "0"
+        and sys.platform.startswith("linux")
+        and len(args) >= 3
+        and args[:2] == [sys.executable, "-m"]
+        and set(options) <= allowed
+    )
+
+
+class _Zygote:
+    """The caller's end: a SOCK_SEQPACKET pair, one request (and one pid back) per fork."""
+
+    def __init__(self) -> None:
+        self.owner = os.getpid()
+        self.lock = threading.Lock()
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        self.control = ours
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "simbridge.zygote", str(theirs.fileno())],
+            pass_fds=(theirs.fileno(),),
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+        )
+        theirs.close()
+        atexit.register(self.close)
+
+    def fork(self, request: dict[str, Any], fds: tuple[int, int, int, int]) -> int:
+        with self.lock:
+            socket.send_fds(self.control, [json.dumps(request).encode()], list(fds))
+            reply = self.control.recv(_STATUS.size)
+        if len(reply) != _STATUS.size:
+            raise OSError("the flight processes' zygote ended")
+        return _STATUS.unpack(reply)[0]
+
+    def close(self) -> None:
+        self.control.close()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.process.wait(timeout=5.0)
+
+
+_zygotes: dict[int, _Zygote] = {}
+_zygotes_lock = threading.Lock()
+
+
+def _zygote() -> _Zygote:
+    """This process's zygote (a forked process starts its own)."""
+    with _zygotes_lock:
+        zygote = _zygotes.get(os.getpid())
+        if zygote is None or zygote.process.poll() is not None:
+            zygote = _zygotes[os.getpid()] = _Zygote()
+        return zygote
+
+
+class WarmProcess(subprocess.Popen):
+    """A Popen whose child the zygote forks; its exit status comes over `_status`."""
+
+    def __init__(
+        self, zygote: _Zygote, args: list[str], preload: tuple[str, ...], **options: Any
+    ) -> None:
+        self._zygote = zygote
+        self._preload = preload
+        self._status: socket.socket | None = None
+        super().__init__(args, **options)
+
+    def _execute_child(  # type: ignore[override]
+        self, args: list[str], executable: Any, preexec_fn: Any, close_fds: bool,
+        pass_fds: Any, cwd: Any, env: Any, startupinfo: Any, creationflags: int, shell: bool,
+        p2cread: int, p2cwrite: int, c2pread: int, c2pwrite: int, errread: int, errwrite: int,
+        *rest: Any,
+    ) -> None:  # fmt: skip
+        process_group = rest[-1] if rest and rest[-1] != -1 else None  # Popen's -1: none
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        request = {
+            "argv": list(args),
+            "preload": list(self._preload),
+            "cwd": os.fsdecode(cwd) if cwd is not None else os.getcwd(),
+            "env": {**(os.environ if env is None else env)},
+            "process_group": process_group,
+        }
+        streams = (
+            p2cread if p2cread != -1 else 0,
+            c2pwrite if c2pwrite != -1 else 1,
+            errwrite if errwrite != -1 else 2,
+        )
+        try:
+            self.pid = self._zygote.fork(request, (*streams, theirs.fileno()))
+            self._status = ours
+            self._child_created = True
+        except BaseException:
+            ours.close()
+            raise
+        finally:
+            theirs.close()
+            self._close_pipe_fds(p2cread, p2cwrite, c2pread, c2pwrite, errread, errwrite)
+
+    def _read_status(self, block: bool) -> None:
+        """The exit status, once the zygote sends it; if the zygote ended first (its socket
+        closed with nothing sent), whether the pid is gone."""
+        assert self._status is not None
+        if self._status.fileno() >= 0:
+            self._status.setblocking(block)
+            try:
+                data = self._status.recv(_STATUS.size)
+            except BlockingIOError:
+                return
+            if len(data) == _STATUS.size:
+                self.returncode = _STATUS.unpack(data)[0]
+            self._status.close()
+        if self.returncode is None and not _alive(self.pid):
+            self.returncode = -signal.SIGKILL
+
+    def _internal_poll(self, *_: Any, **__: Any) -> int | None:  # type: ignore[override]
+        if self.returncode is None and self._status is not None:
+            self._read_status(block=False)
+        return self.returncode
+
+    def _wait(self, timeout: float | None) -> int:  # type: ignore[override]
+        end = None if timeout is None else time.monotonic() + timeout
+        while self.returncode is None:
+            assert self._status is not None
+            left = None if end is None else max(0.0, end - time.monotonic())
+            if self._status.fileno() >= 0:
+                ready, _, _ = select.select([self._status], [], [], left)
+            else:  # orphaned by its zygote: watch the pid
+                time.sleep(0.05 if left is None else min(0.05, left))
+                ready = [True]
+            if ready:
+                self._read_status(block=True)
+            elif self.returncode is None:
+                raise subprocess.TimeoutExpired(self.args, timeout)  # type: ignore[arg-type]
+            if self.returncode is None and end is not None and time.monotonic() >= end:
+                raise subprocess.TimeoutExpired(self.args, timeout)  # type: ignore[arg-type]
+        return self.returncode
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+# --- the zygote's side --------------------------------------------------------------------
+
+
+def serve(control: socket.socket) -> list[str] | None:
+    """Fork a child per request until the caller closes `control`. Returns in a child (its
+    command's arguments after the interpreter's: `-m MODULE ...`), and None in the zygote
+    when it is done."""
+    wake_read, wake_write = os.pipe()
+    os.set_blocking(wake_write, False)
+    signal.signal(signal.SIGCHLD, lambda *_: None)
+    signal.set_wakeup_fd(wake_write)
+    children: dict[int, socket.socket] = {}
+    python_env = {k: v for k, v in os.environ.items() if k.startswith("PYTHON")}
+    while True:
+        ready, _, _ = select.select([control, wake_read], [], [])
+        if wake_read in ready:
+            os.read(wake_read, 4096)
+        _reap(children)
+        if control not in ready:
+            continue
+        message, fds, _, _ = socket.recv_fds(control, _MAX_REQUEST, 4)
+        if not message:
+            return None
+        request = json.loads(message)
+        for name in request["preload"]:
+            importlib.import_module(name)
+        pid = os.fork()
+        if pid == 0:
+            for fd in (wake_read, wake_write, control.fileno()):
+                os.close(fd)
+            for status in children.values():
+                status.close()
+            return _become(request, fds, python_env)
+        for fd in fds[:3]:
+            os.close(fd)
+        children[pid] = socket.socket(fileno=fds[3])
+        control.send(_STATUS.pack(pid))
+
+
+def _reap(children: dict[int, socket.socket]) -> None:
+    while children:
+        try:
+            pid, status = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            return
+        if pid == 0:
+            return
+        sock = children.pop(pid, None)
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.send(_STATUS.pack(os.waitstatus_to_exitcode(status)))
+            sock.close()
+
+
+def _become(request: dict[str, Any], fds: list[int], python_env: dict[str, str]) -> list[str]:
+    """In the child: the process `python -m MODULE ARGS` would be, or exec it as asked where
+    the interpreter's own settings differ from the zygote's."""
+    signal.set_wakeup_fd(-1)
+    signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+    os.close(fds[3])
+    if request["process_group"] is not None:
+        os.setpgid(0, request["process_group"])
+    for target, fd in enumerate(fds[:3]):
+        os.dup2(fd, target)
+    for fd in set(fds[:3]):
+        if fd > 2:
+            os.close(fd)
+    os.chdir(request["cwd"])
+    env: dict[str, str] = request["env"]
+    argv: list[str] = request["argv"]
+    if {k: v for k, v in env.items() if k.startswith("PYTHON")} != python_env:
+        os.execve(argv[0], argv, env)
+    os.environ.clear()
+    os.environ.update(env)
+    # `ps` and /proc show the command, not the zygote's
+    setproctitle.setproctitle(" ".join(argv))
+    sys.stdin = io.TextIOWrapper(io.FileIO(0, "r", closefd=False))
+    sys.stdout = io.TextIOWrapper(io.FileIO(1, "w", closefd=False), line_buffering=os.isatty(1))
+    sys.stderr = io.TextIOWrapper(
+        io.FileIO(2, "w", closefd=False), line_buffering=True, errors="backslashreplace"
+    )
+    return argv[1:]
+
+
+def _main() -> None:
+    # the title's room is the zygote's arguments and environment: claimed before a child
+    # replaces the environment
+    setproctitle.setproctitle(setproctitle.getproctitle())
+    args = serve(socket.socket(fileno=int(sys.argv[1])))
+    if args is not None:  # a child: `-m MODULE ARGS`, as the interpreter runs it
+        sys.argv = [sys.argv[0], *args[2:]]
+        runpy.run_module(args[1], run_name="__main__", alter_sys=True)
+
+
+if __name__ == "__main__":
+    _main()
