@@ -14,7 +14,6 @@ from __future__ import annotations
 import atexit
 import contextlib
 import importlib
-import io
 import json
 import os
 import runpy
@@ -32,7 +31,8 @@ from typing import Any
 import setproctitle
 
 WARM_ENV = "GROUNDFX_WARM_START"
-_STATUS = struct.Struct("q")
+_PID = struct.Struct("q")
+_STATUS = struct.Struct("qd")  # exit code (Popen's: -N for signal N), CPU seconds
 _MAX_REQUEST = 1 << 20
 
 
@@ -78,15 +78,36 @@ class _Zygote:
     def fork(self, request: dict[str, Any], fds: tuple[int, int, int, int]) -> int:
         with self.lock:
             socket.send_fds(self.control, [json.dumps(request).encode()], list(fds))
-            reply = self.control.recv(_STATUS.size)
-        if len(reply) != _STATUS.size:
+            reply = self.control.recv(_PID.size)
+        if len(reply) != _PID.size:
             raise OSError("the flight processes' zygote ended")
-        return _STATUS.unpack(reply)[0]
+        return _PID.unpack(reply)[0]
 
     def close(self) -> None:
         self.control.close()
         with contextlib.suppress(subprocess.TimeoutExpired):
             self.process.wait(timeout=5.0)
+
+
+class _Reaped:
+    """The CPU time of this process's warm children that ended: a fresh interpreter's would
+    be in its RUSAGE_CHILDREN."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.cpu_s = 0.0
+
+    def add(self, cpu_s: float) -> None:
+        with self.lock:
+            self.cpu_s += cpu_s
+
+
+_reaped = _Reaped()
+
+
+def reaped_cpu_s() -> float:
+    """CPU seconds of the warm children this process has seen end (cf. RUSAGE_CHILDREN)."""
+    return _reaped.cpu_s
 
 
 _zygotes: dict[int, _Zygote] = {}
@@ -111,6 +132,10 @@ class WarmProcess(subprocess.Popen):
         self._zygote = zygote
         self._preload = preload
         self._status: socket.socket | None = None
+        # Popen may be waited for from two threads (`fly` watches its simulator): the socket
+        # stays open until the object goes, and one thread at a time reads it
+        self._status_lock = threading.Lock()
+        self._orphaned = False
         super().__init__(args, **options)
 
     def _execute_child(  # type: ignore[override]
@@ -128,13 +153,17 @@ class WarmProcess(subprocess.Popen):
             "env": {**(os.environ if env is None else env)},
             "process_group": process_group,
         }
-        streams = (
-            p2cread if p2cread != -1 else 0,
-            c2pwrite if c2pwrite != -1 else 1,
-            errwrite if errwrite != -1 else 2,
-        )
+        # a stream not redirected is this process's own; where it has none (a multiprocessing
+        # worker closes its stdin), the child reads or writes /dev/null
+        stand_ins: list[int] = []
+        streams = [p2cread, c2pwrite, errwrite]
+        for k, fd in enumerate(streams):
+            if fd == -1:
+                streams[k] = k if _is_open(k) else os.open(os.devnull, os.O_RDWR)
+                stand_ins += [streams[k]] if streams[k] != k else []
         try:
             self.pid = self._zygote.fork(request, (*streams, theirs.fileno()))
+            ours.setblocking(False)
             self._status = ours
             self._child_created = True
         except BaseException:
@@ -142,46 +171,65 @@ class WarmProcess(subprocess.Popen):
             raise
         finally:
             theirs.close()
+            for fd in stand_ins:
+                os.close(fd)
             self._close_pipe_fds(p2cread, p2cwrite, c2pread, c2pwrite, errread, errwrite)
 
-    def _read_status(self, block: bool) -> None:
-        """The exit status, once the zygote sends it; if the zygote ended first (its socket
+    def _read_status(self) -> None:
+        """The exit status, if the zygote has sent it; if the zygote ended first (its socket
         closed with nothing sent), whether the pid is gone."""
         assert self._status is not None
-        if self._status.fileno() >= 0:
-            self._status.setblocking(block)
-            try:
-                data = self._status.recv(_STATUS.size)
-            except BlockingIOError:
+        with self._status_lock:
+            if self.returncode is not None:
                 return
-            if len(data) == _STATUS.size:
-                self.returncode = _STATUS.unpack(data)[0]
-            self._status.close()
-        if self.returncode is None and not _alive(self.pid):
-            self.returncode = -signal.SIGKILL
+            if not self._orphaned:
+                try:
+                    data = self._status.recv(_STATUS.size)
+                except BlockingIOError:
+                    return
+                except OSError:
+                    data = b""
+                if len(data) == _STATUS.size:
+                    self.returncode, cpu_s = _STATUS.unpack(data)
+                    _reaped.add(cpu_s)
+                    return
+                self._orphaned = True
+            if not _alive(self.pid):
+                self.returncode = -signal.SIGKILL
 
     def _internal_poll(self, *_: Any, **__: Any) -> int | None:  # type: ignore[override]
         if self.returncode is None and self._status is not None:
-            self._read_status(block=False)
+            self._read_status()
         return self.returncode
 
     def _wait(self, timeout: float | None) -> int:  # type: ignore[override]
+        assert self._status is not None
         end = None if timeout is None else time.monotonic() + timeout
-        while self.returncode is None:
-            assert self._status is not None
-            left = None if end is None else max(0.0, end - time.monotonic())
-            if self._status.fileno() >= 0:
-                ready, _, _ = select.select([self._status], [], [], left)
-            else:  # orphaned by its zygote: watch the pid
+        while True:
+            self._read_status()
+            if self.returncode is not None:
+                return self.returncode
+            left = None if end is None else end - time.monotonic()
+            if left is not None and left <= 0:
+                raise subprocess.TimeoutExpired(self.args, timeout)  # type: ignore[arg-type]
+            if self._orphaned:  # watch the pid
                 time.sleep(0.05 if left is None else min(0.05, left))
-                ready = [True]
-            if ready:
-                self._read_status(block=True)
-            elif self.returncode is None:
-                raise subprocess.TimeoutExpired(self.args, timeout)  # type: ignore[arg-type]
-            if self.returncode is None and end is not None and time.monotonic() >= end:
-                raise subprocess.TimeoutExpired(self.args, timeout)  # type: ignore[arg-type]
-        return self.returncode
+            else:
+                select.select([self._status], [], [], left)
+
+    def __del__(self) -> None:
+        # one still running is kept by Popen (subprocess._active) and polled on
+        if self._status is not None and self.returncode is not None:
+            self._status.close()
+        super().__del__()
+
+
+def _is_open(fd: int) -> bool:
+    try:
+        os.fstat(fd)
+    except OSError:
+        return False
+    return True
 
 
 def _alive(pid: int) -> bool:
@@ -201,6 +249,9 @@ def serve(control: socket.socket) -> list[str] | None:
     """Fork a child per request until the caller closes `control`. Returns in a child (its
     command's arguments after the interpreter's: `-m MODULE ...`), and None in the zygote
     when it is done."""
+    # a terminal's Ctrl-C reaches the whole process group: the children act on it, and the
+    # zygote ends when its caller does
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     wake_read, wake_write = os.pipe()
     os.set_blocking(wake_write, False)
     signal.signal(signal.SIGCHLD, lambda *_: None)
@@ -230,21 +281,22 @@ def serve(control: socket.socket) -> list[str] | None:
         for fd in fds[:3]:
             os.close(fd)
         children[pid] = socket.socket(fileno=fds[3])
-        control.send(_STATUS.pack(pid))
+        control.send(_PID.pack(pid))
 
 
 def _reap(children: dict[int, socket.socket]) -> None:
     while children:
         try:
-            pid, status = os.waitpid(-1, os.WNOHANG)
+            pid, status, usage = os.wait4(-1, os.WNOHANG)
         except ChildProcessError:
             return
         if pid == 0:
             return
         sock = children.pop(pid, None)
         if sock is not None:
+            cpu_s = usage.ru_utime + usage.ru_stime
             with contextlib.suppress(OSError):
-                sock.send(_STATUS.pack(os.waitstatus_to_exitcode(status)))
+                sock.send(_STATUS.pack(os.waitstatus_to_exitcode(status), cpu_s))
             sock.close()
 
 
@@ -253,6 +305,7 @@ def _become(request: dict[str, Any], fds: list[int], python_env: dict[str, str])
     the interpreter's own settings differ from the zygote's."""
     signal.set_wakeup_fd(-1)
     signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     os.close(fds[3])
     if request["process_group"] is not None:
         os.setpgid(0, request["process_group"])
@@ -262,6 +315,7 @@ def _become(request: dict[str, Any], fds: list[int], python_env: dict[str, str])
         if fd > 2:
             os.close(fd)
     os.chdir(request["cwd"])
+    sys.path[0] = request["cwd"]  # as `python -m` puts its folder first
     env: dict[str, str] = request["env"]
     argv: list[str] = request["argv"]
     if {k: v for k, v in env.items() if k.startswith("PYTHON")} != python_env:
@@ -270,11 +324,14 @@ def _become(request: dict[str, Any], fds: list[int], python_env: dict[str, str])
     os.environ.update(env)
     # `ps` and /proc show the command, not the zygote's
     setproctitle.setproctitle(" ".join(argv))
-    sys.stdin = io.TextIOWrapper(io.FileIO(0, "r", closefd=False))
-    sys.stdout = io.TextIOWrapper(io.FileIO(1, "w", closefd=False), line_buffering=os.isatty(1))
-    sys.stderr = io.TextIOWrapper(
-        io.FileIO(2, "w", closefd=False), line_buffering=True, errors="backslashreplace"
-    )
+    # the streams Python opens at start, on the child's descriptors (the zygote's own stay
+    # referenced by sys.__stdout__ and the like: collected, they would close 0, 1 and 2)
+    sys.stdin = open(0, closefd=False)  # noqa: SIM115 (the process's own, never closed)
+    sys.stdout = open(1, "w", buffering=1 if os.isatty(1) else -1, closefd=False)  # noqa: SIM115
+    sys.stderr = open(2, "w", buffering=1, errors="backslashreplace", closefd=False)  # noqa: SIM115
+    if env.get("PYTHONUNBUFFERED"):
+        sys.stdout.reconfigure(write_through=True)
+        sys.stderr.reconfigure(write_through=True)
     return argv[1:]
 
 

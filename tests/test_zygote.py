@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from simbridge.launch import LISTENING, SIM_IMPORTS, sim_command
-from simbridge.zygote import WarmProcess, popen
+from simbridge.zygote import WarmProcess, popen, reaped_cpu_s
 
 PIPES = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, "text": True}
 
@@ -35,6 +35,8 @@ def test_a_forked_command_prints_and_exits_as_python_m_would() -> None:
 
 
 def test_a_forked_simulator_shows_its_command_waits_and_dies_by_its_signal(tmp_path: Path) -> None:
+    """... and its CPU time is counted, as a child's would be (a campaign's records)."""
+    cpu_s = reaped_cpu_s()
     sim = popen(sim_command("default"), SIM_IMPORTS, cwd=tmp_path, **PIPES)
     try:
         assert sim.stdout is not None and sim.stdout.readline().startswith(LISTENING)
@@ -46,6 +48,7 @@ def test_a_forked_simulator_shows_its_command_waits_and_dies_by_its_signal(tmp_p
             sim.wait(timeout=0.2)
         os.kill(sim.pid, signal.SIGKILL)
         assert sim.wait(timeout=30) == -signal.SIGKILL
+        assert reaped_cpu_s() > cpu_s + 0.01  # it connected PyBullet and opened its port
     finally:
         if sim.poll() is None:
             sim.kill()
@@ -59,3 +62,21 @@ def test_warm_start_can_be_turned_off_and_other_commands_start_as_asked(monkeypa
     monkeypatch.delenv("GROUNDFX_WARM_START")
     other = popen([sys.executable, "-c", "print('cold')"], (), **PIPES)
     assert not isinstance(other, WarmProcess) and other.communicate(timeout=60)[0] == "cold\n"
+
+
+def test_a_launcher_without_stdin_starts_its_children_warm() -> None:
+    """A multiprocessing worker (every campaign's flights) has closed its stdin: the child
+    reads /dev/null."""
+    script = (
+        "import os, subprocess, sys\n"
+        "os.close(0)\n"
+        "from simbridge.launch import SIM_IMPORTS\n"
+        "from simbridge.zygote import popen\n"
+        "p = popen([sys.executable, '-m', 'mission.cli', 'sim', '--help'], SIM_IMPORTS,\n"
+        "          stdout=subprocess.PIPE, text=True)\n"
+        "out, _ = p.communicate(timeout=60)\n"
+        "print(type(p).__name__, out.split()[0], p.returncode)\n"
+    )
+    command = [sys.executable, "-c", script]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert done.stdout.split() == ["WarmProcess", "usage:", "0"], done.stderr

@@ -30,6 +30,7 @@ from tqdm import tqdm
 
 from mission.campaigns.shipping import input_files, land, run_carried
 from simbridge.config import ConfigError
+from simbridge.zygote import reaped_cpu_s
 
 
 @dataclass(frozen=True)
@@ -131,7 +132,8 @@ def _cpu_s() -> float:
     own, children = (
         resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
     )
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+    warm = reaped_cpu_s()  # a flight's processes forked by a zygote are not our children
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime + warm
 
 
 @dataclass(frozen=True)
