@@ -43,7 +43,10 @@ def popen(args: Sequence[str], preload: Sequence[str], **options: Any) -> subpro
     thread: a zygote holds none when it forks)."""
     args = list(args)
     if _warm_start_possible(args, options):
-        return WarmProcess(_zygote(), args, tuple(preload), **options)
+        try:
+            return WarmProcess(_zygote(), args, tuple(preload), **options)
+        except OSError as err:  # no zygote to fork from (it failed): a fresh interpreter
+            print(f"groundfx: starting {args[2]} cold: {err}", file=sys.stderr)
     return subprocess.Popen(args, **options)
 
 
@@ -84,6 +87,8 @@ class _Zygote:
         return _PID.unpack(reply)[0]
 
     def close(self) -> None:
+        if os.getpid() != self.owner:  # a forked copy of the process that started it
+            return
         self.control.close()
         with contextlib.suppress(subprocess.TimeoutExpired):
             self.process.wait(timeout=5.0)
@@ -270,7 +275,9 @@ def serve(control: socket.socket) -> list[str] | None:
             return None
         request = json.loads(message)
         for name in request["preload"]:
-            importlib.import_module(name)
+            # one that fails to import fails in the child, which reports it as it would
+            with contextlib.suppress(Exception):
+                importlib.import_module(name)
         pid = os.fork()
         if pid == 0:
             for fd in (wake_read, wake_write, control.fileno()):

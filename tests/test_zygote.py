@@ -80,3 +80,16 @@ def test_a_launcher_without_stdin_starts_its_children_warm() -> None:
     command = [sys.executable, "-c", script]
     done = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert done.stdout.split() == ["WarmProcess", "usage:", "0"], done.stderr
+
+
+def test_a_command_whose_imports_fail_reports_it_as_python_m_would(tmp_path: Path) -> None:
+    """The zygote imports nothing it cannot: the child raises the error and the next flight
+    process still starts warm."""
+    (tmp_path / "broken_command.py").write_text("import no_such_module_here\n")
+    broken = popen([sys.executable, "-m", "broken_command"], ("broken_command",), cwd=tmp_path,
+                   **PIPES)  # fmt: skip
+    err = broken.communicate(timeout=60)[1]
+    assert isinstance(broken, WarmProcess) and broken.returncode == 1
+    assert "ModuleNotFoundError: No module named 'no_such_module_here'" in err
+    after = popen(groundfx("sim", "--help"), SIM_IMPORTS, **PIPES)
+    assert isinstance(after, WarmProcess) and after.communicate(timeout=60)[0]
