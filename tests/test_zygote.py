@@ -48,7 +48,7 @@ def test_a_forked_simulator_shows_its_command_waits_and_dies_by_its_signal(tmp_p
             sim.wait(timeout=0.2)
         os.kill(sim.pid, signal.SIGKILL)
         assert sim.wait(timeout=30) == -signal.SIGKILL
-        assert reaped_cpu_s() > cpu_s + 0.01  # it connected PyBullet and opened its port
+        assert reaped_cpu_s() > cpu_s  # it loaded its world and opened its port
     finally:
         if sim.poll() is None:
             sim.kill()
