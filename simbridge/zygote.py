@@ -280,8 +280,9 @@ def serve(control: socket.socket) -> list[str] | None:
                 importlib.import_module(name)
         pid = os.fork()
         if pid == 0:
-            for fd in (wake_read, wake_write, control.fileno()):
-                os.close(fd)
+            os.close(wake_read)
+            os.close(wake_write)
+            control.close()  # through its object, which would otherwise close it again
             for status in children.values():
                 status.close()
             return _become(request, fds, python_env)
