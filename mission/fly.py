@@ -329,7 +329,8 @@ def _ground_lines(summary: dict[str, Any]) -> list[str]:
     events = []
     for e in summary.get("online_ground_events") or []:
         after = f" ({e['t_s'] - near:+.1f} s from coming down near the surface)" if near else ""
-        events.append(f"{e['ground']} {e['event']} at {e['t_s']:.1f} s{after}")
+        into = f" into {e['into']}" if e.get("into") else ""
+        events.append(f"{e['ground']} {e['event']}{into} at {e['t_s']:.1f} s{after}")
     known = ", ".join(summary.get("online_grounds") or [])
     return [
         f"  grounds: {summary.get('online_ground')} in use at the end (known: {known}); "

@@ -136,6 +136,56 @@ def test_a_ground_is_remembered_and_recalled_whole(tmp_path):
     assert names == ["learnt-1"]
 
 
+def with_learnt(coefficients: np.ndarray) -> GroundEffectNet:
+    """The basis carrying one learnt ground (as a model saved after a flight would)."""
+    header = {**BASIS.header, "basis": {**BASIS.header["basis"]}}
+    header["basis"]["learnt"] = [{"name": "learnt-1", "coefficients": coefficients.tolist()}]
+    return GroundEffectNet(BASIS.weights, BASIS.biases, BASIS.normaliser, header)
+
+
+def test_a_ground_learnt_at_the_hold_is_recalled_within_a_second_of_coming_down():
+    """A ground learnt at the hold, 3 cm up, is right there and wrong 10-30 cm up (nothing
+    there told it otherwise). On a return the vehicle comes down through those heights
+    first; the stored ground is judged on the last second near the surface, so it is
+    recalled within a second or so of reaching it, and the ground the flight began to learn
+    meanwhile is merged into it, not kept as a second copy."""
+    from learner.online.composite_session import basis_values, with_coefficients
+
+    mid, hold = STATES[(STATES[:, 0] >= 0.1) & (STATES[:, 0] < 0.3)], STATES[STATES[:, 0] < 0.04]
+    norm = BASIS.normaliser
+
+    def phi(x: np.ndarray) -> np.ndarray:
+        return basis_values(
+            tuple(BASIS.weights), tuple(BASIS.biases), (x - norm.x_mean) / norm.x_std
+        )
+
+    head = BASIS.header["basis"]["grounds"]["rho2"]
+    rho2 = np.concatenate([np.asarray(head["weights"])[Z], [np.asarray(head["biases"])[Z]]])
+    # the change that moves the prediction 10-30 cm up the most for the least at the hold
+    p_hold, p_mid = phi(hold), phi(mid)
+    delta = np.linalg.solve(p_hold.T @ p_hold / len(hold) + 1e-7 * np.eye(len(rho2)), p_mid.mean(0))
+    delta *= 0.015 / (np.sqrt(np.mean((p_mid @ delta) ** 2)) * norm.y_std[Z])  # 15 mN RMS
+    stored = with_learnt(rho2 + delta)
+    session = OnlineSession(stored, COMPOSITE)
+    rng = np.random.default_rng(5)
+    x = mid[rng.choice(len(mid), 300)]  # 3 s coming down, the home ground's force
+    session.add_many(
+        x, BASIS.predict_batch(x) + rng.normal(0.0, NOISE_N, (300, 3)), np.arange(300) * 0.01
+    )
+    assert session.counts["recalled"] == 0
+    layer = with_coefficients(tuple(BASIS.weights), tuple(BASIS.biases), rho2 + delta)
+    stored_net = GroundEffectNet(list(layer.weights), list(layer.biases), norm, {})
+    x = hold[rng.choice(len(hold), 600)]  # then the stored ground's force at the hold
+    y = stored_net.predict_batch(x) + rng.normal(0.0, NOISE_N, (600, 3))
+    for k in range(0, 600, 16):
+        session.add_many(x[k : k + 16], y[k : k + 16], 3.0 + np.arange(k, k + 16) * 0.01)
+        if session.counts["recalled"]:
+            break
+    assert session.counts["recalled"] == 1 and k + 16 <= 160, (k, session.counts)
+    basis = session.snapshot.net.header["basis"]
+    assert basis["current"] == "learnt-1" and [g["name"] for g in basis["learnt"]] == ["learnt-1"]
+
+
 def test_composite_needs_a_basis_model():
     from simbridge.config import ConfigError
 

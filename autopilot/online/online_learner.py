@@ -248,8 +248,14 @@ class OnlineLearner:
         """composite: a ground recalled, or a new one learnt (its first publication)."""
         basis = snapshot.net.header.get("basis") or {}
         ground = basis.get("current", basis.get("home"))
-        if verdict == "accepted (recalled)":
+        if verdict.startswith("accepted (recalled"):
             event = "recalled"
+            # "accepted (recalled, merging learnt-2)": a ground this flight created, dropped
+            merged = verdict.partition(", merging ")[2].rstrip(")")
+            if merged:
+                self.ground_events.append(
+                    {"t_s": snapshot.t_s, "event": "merged", "ground": merged, "into": ground}
+                )
         elif verdict == "accepted (adapted)" and ground not in self._grounds_known:
             event = "created"
         else:

@@ -25,17 +25,24 @@ the lateral targets are measurement noise). In standardised units throughout.
   sigma^2 inflated by the residual's lag-1 autocorrelation: correlated samples are fewer
   independent ones).
   A correct model is therefore left alone; a consistent error (the same sign sample after
-  sample) passes the test within a fraction of a second.
+  sample) passes the test within a fraction of a second. A change that passes is published
+  once the estimate has converged (`settle`: its last batch improved its fit to the window
+  by at most that much), not while it is still moving towards the data: an estimate
+  published on the way would be published again within the second.
 - Memory: the grounds known (the offline training grounds, protected, and every ground
   learnt in flight) are kept with their coefficients. A ground is identified by how it
-  pushes at the heights the vehicle flies: when a stored ground explains the window better
-  than what is published (the same test, with the lower threshold of a hypothesis fitted to
-  nothing, `recall_confidence`, while the flight is on the ground it started on; the
-  change's once it recalled or learnt one) and the fresh estimate does not explain it
-  better by the change's threshold, it is recalled whole (estimate, publication and a fresh
-  prior around it). A learnt ground's
+  pushes where the vehicle is now: when a stored ground explains the last `recall_window`
+  samples better than what is published (a likelihood ratio against the noise of the
+  stored ground's own residual; the threshold of a hypothesis fitted to nothing,
+  `recall_confidence`, while the flight is on the ground it started on, the change's once
+  it recalled or learnt one) and the fresh estimate does not explain them better by the
+  change's threshold, it is recalled whole (estimate, publication and a fresh prior around
+  it). A learnt ground was fitted where the vehicle held, near the surface: judged on the
+  whole window, the descent before would count against it for seconds. A learnt ground's
   coefficients follow the estimate while it is the ground in use; a protected one is never
-  changed (learning on it starts a new entry).
+  changed (learning on it starts a new entry). A ground this flight created and then leaves
+  for a stored one is dropped (merged): it was the stored ground, learnt again before the
+  memory told them apart.
 """
 
 from __future__ import annotations
@@ -63,6 +70,11 @@ class CompositeConfig:
     # (two simple hypotheses: a threshold of 2 ln(1/alpha), 9.2 for a 1 % error)
     recall_confidence: float
     window: int  # samples the tests look at
+    recall_window: int  # the most recent samples a stored ground is judged on
+    # a change is published once the estimate has converged: its last batch improved its
+    # fit to the window by at most this many noise variances (a moving estimate would be
+    # published again within the second)
+    settle: float
     far_var: float  # the prior's variance of the prediction far from the surface
     size_sd: float  # the prior sd of a relative change of the effect's size
     layer_bound: float  # spectral norm of the last layer, kept
@@ -87,6 +99,7 @@ class CompositeState:
     window_y: np.ndarray  # (<= window,) recent vertical targets
     learnt: int = 0  # grounds learnt so far (names)
     settled: bool = False  # a ground was recalled or learnt in this flight
+    created: str = ""  # the ground this flight created, if any
 
 
 @dataclass(frozen=True)
@@ -94,6 +107,7 @@ class Decision:
     kind: str  # "held" (nothing published), "adapted", "recalled"
     statistic: float  # the likelihood ratio of the change published (or the best refused)
     ground: str  # the ground in use afterwards
+    merged: str = ""  # a ground this flight created, dropped for the stored one recalled
 
 
 def prior_covariance(
@@ -220,6 +234,38 @@ def bounded(a: np.ndarray, others: np.ndarray, layer_bound: float) -> np.ndarray
     return row
 
 
+def best_stored(
+    state: CompositeState,
+    wp: np.ndarray,
+    wy: np.ndarray,
+    fresh: np.ndarray,
+    config: CompositeConfig,
+) -> tuple[int, float]:
+    """The stored ground that best explains the last `recall_window` samples against what is
+    published (its index, -1 if none, and the likelihood ratio), among those the fresh
+    estimate does not beat there by the change's threshold.
+
+    A stored ground is a fixed hypothesis about the surface under the vehicle: it is judged
+    on the last second of data, not on the descent that came before (a ground learnt at the
+    hold says little about 10 cm up), and against the noise its own residual shows (the
+    residual of the hypothesis being tested; the fresh estimate's, still fitting the
+    descent, would count a clear match as noise)."""
+    rp, ry = wp[-config.recall_window :], wy[-config.recall_window :]
+    published = ssr(rp, ry, state.published)
+    fresh_ssr = ssr(rp, ry, fresh)
+    best, best_gain = -1, -np.inf
+    for k, g in enumerate(state.grounds):
+        if k == state.current and np.array_equal(g.coefficients, state.published):
+            continue
+        residual = ry - rp @ g.coefficients
+        g_ssr = float(residual @ residual)
+        sigma2 = max(g_ssr / len(ry), config.noise_floor_var) * correlation_factor(residual)
+        g_gain = (published - g_ssr) / sigma2
+        if g_gain > best_gain and (g_ssr - fresh_ssr) / sigma2 < config.confidence:
+            best, best_gain = k, g_gain
+    return best, best_gain
+
+
 def composite_update(
     state: CompositeState,
     phi: np.ndarray,
@@ -230,6 +276,7 @@ def composite_update(
 ) -> tuple[CompositeState, Decision]:
     """A batch of samples (basis values with their constant, vertical targets, tracking
     errors as standardised forces per gain): the new state and what was published."""
+    previous = state.estimate
     a, p = kalman(state.estimate, state.covariance, state.prior, phi, y, tracking, config)
     a = bounded(a, lateral_rows, config.layer_bound)
     # the tests judge the composite target: the measured force and the tracking error's
@@ -242,34 +289,19 @@ def composite_update(
     # the noise variance per independent sample: correlated samples count for fewer
     sigma2 = max(fresh / n, config.noise_floor_var) * correlation_factor(wy - wp @ a)
     gain = (published - fresh) / sigma2
-    # a stored ground that explains the window as well as the fresh estimate: recall it
-    best, best_gain = -1, -np.inf
-    for k, g in enumerate(state.grounds):
-        if k == state.current and np.array_equal(g.coefficients, state.published):
-            continue
-        g_gain = (published - ssr(wp, wy, g.coefficients)) / sigma2
-        if g_gain > best_gain:
-            best, best_gain = k, g_gain
     name = state.grounds[state.current].name
     # leaving the ground the flight started on for a stored one takes the recall's evidence;
     # once the flight's data chose a ground, going over to another is a change like any
     # other (two stored grounds that differ little would otherwise take turns)
     threshold = config.confidence if state.settled else config.recall_confidence
-    if best >= 0 and best_gain > threshold and gain - best_gain < config.confidence:
-        recalled = state.grounds[best].coefficients.copy()
-        state = replace(
-            state,
-            estimate=recalled,
-            covariance=state.prior.copy(),
-            published=recalled.copy(),
-            current=best,
-            settled=True,
-        )
-        return state, Decision("recalled", best_gain, state.grounds[best].name)
-    if gain <= config.confidence:
+    best, best_gain = best_stored(state, wp, wy, a, config)
+    if best >= 0 and best_gain > threshold:
+        return recall(state, best, best_gain)
+    moving = (ssr(wp, wy, previous) - fresh) / sigma2
+    if gain <= config.confidence or moving > config.settle:
         return state, Decision("held", gain, name)
     grounds = list(state.grounds)
-    current, learnt = state.current, state.learnt
+    current, learnt, created = state.current, state.learnt, state.created
     if grounds[current].protected:  # learning on an offline ground: a new ground
         learnt += 1
         grounds.append(Ground(f"learnt-{learnt}", a.copy(), False))
@@ -277,6 +309,7 @@ def composite_update(
         if len(kept) > MAX_LEARNT:  # the oldest learnt ground makes room
             grounds.remove(kept[0])
         current = len(grounds) - 1
+        created = grounds[current].name
     else:
         grounds[current] = replace(grounds[current], coefficients=a.copy())
     state = replace(
@@ -286,8 +319,32 @@ def composite_update(
         current=current,
         learnt=learnt,
         settled=True,
+        created=created,
     )
     return state, Decision("adapted", gain, grounds[current].name)
+
+
+def recall(state: CompositeState, best: int, statistic: float) -> tuple[CompositeState, Decision]:
+    """Stored ground `best` whole: estimate, publication and a fresh prior around it. A ground
+    this flight created and now leaves for a stored one that explains the last second better
+    was that ground, learnt again before the memory told them apart: it is dropped (merged),
+    not kept as a second copy."""
+    grounds = list(state.grounds)
+    recalled = grounds[best]
+    merged = ""
+    if grounds[state.current].name == state.created and state.created:
+        merged = grounds.pop(state.current).name
+    state = replace(
+        state,
+        estimate=recalled.coefficients.copy(),
+        covariance=state.prior.copy(),
+        published=recalled.coefficients.copy(),
+        grounds=tuple(grounds),
+        current=next(i for i, g in enumerate(grounds) if g is recalled),
+        settled=True,
+        created="" if merged else state.created,
+    )
+    return state, Decision("recalled", statistic, recalled.name, merged)
 
 
 def grounds_from_header(header: dict, n_features: int) -> tuple[tuple[Ground, ...], int]:

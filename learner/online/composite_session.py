@@ -38,6 +38,8 @@ def composite_config(
         confidence=settings.composite_confidence,
         recall_confidence=settings.composite_recall_confidence,
         window=settings.composite_window,
+        recall_window=settings.composite_recall_window,
+        settle=settings.composite_settle,
         far_var=(settings.composite_far_n / target_scale_n) ** 2,
         size_sd=settings.composite_size_sd,
         layer_bound=layer_bound,

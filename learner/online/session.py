@@ -206,15 +206,24 @@ class OnlineSession:
         self._composite = state
         self.last_decision = decision.kind
         self.counts[decision.kind] += 1
+        threshold = self._composite_config.confidence
+        if decision.kind == "held" and decision.statistic > threshold:
+            self.counts["settling"] += 1  # confident of a change, the estimate still moving
+            self.last_verdict = (
+                f"held: likelihood ratio {decision.statistic:.3g} over the threshold "
+                f"{threshold:g}, the estimate still converging"
+            )
+            return None
         if decision.kind == "held":
             self.held_statistics.append(float(decision.statistic))
             self.last_verdict = (
                 f"held: likelihood ratio {decision.statistic:.3g} under the confidence "
-                f"threshold {self._composite_config.confidence:g}"
+                f"threshold {threshold:g}"
             )
             return None
         self.counts["accepted"] += 1
-        self.last_verdict = f"accepted ({decision.kind})"
+        merged = f", merging {decision.merged}" if decision.merged else ""
+        self.last_verdict = f"accepted ({decision.kind}{merged})"
         return self._publish_composite(t_s, self.last_loss)
 
     def held_evidence(self) -> dict[str, float] | None:

@@ -151,6 +151,17 @@ class OnlineSettings:
     composite_window: int = param(
         300, lo=8, hi=100000, doc="composite: recent samples the confidence test looks at"
     )
+    composite_recall_window: int = param(
+        100, lo=8, hi=100000, doc="composite: recent samples a stored ground is judged on"
+    )
+    composite_settle: float = tunable(
+        "GFX_OL_SETTLE",
+        1.0,
+        lo=0.0,
+        hi=1e6,
+        doc="composite: a change waits until the estimate's last batch improved its fit by "
+        "at most this likelihood ratio",
+    )
 
     def __post_init__(self) -> None:
         check_settings(self)

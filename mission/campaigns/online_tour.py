@@ -92,12 +92,17 @@ def leg_figures(summary: dict[str, Any]) -> dict[str, Any]:
     events = summary.get("online_ground_events") or []
     near = summary.get("online_near_surface_s")
     recalls = [e for e in events if e["event"] == "recalled"]
+    merged = {e["ground"] for e in events if e["event"] == "merged"}
     hold = summary.get("hold_z_rms_error_m")
     model = summary.get("ge_z_hold_rms_error_n")
     return {
         "ground": summary["ground"],
         "landed": bool(summary.get("landed")),
-        "created": [e["ground"] for e in events if e["event"] == "created"],
+        # a ground created and then merged into a stored one is not kept
+        "created": [
+            e["ground"] for e in events if e["event"] == "created" and e["ground"] not in merged
+        ],
+        "merged": sorted(merged),
         "recalled": [e["ground"] for e in recalls],
         # how long after first coming down near the surface the first recall came
         "recall_after_s": (recalls[0]["t_s"] - near) if recalls and near is not None else None,
