@@ -1,6 +1,6 @@
-"""The gap bench's issue-16 cases and their scoring, on hand-written diagnosis results (no
-flight): out-of-catalogue verdicts read the diagnosis defensively, catalogue cases are held
-to the exact set and 10% parameter error."""
+"""The gap bench's cases and their scoring, on hand-written diagnosis results (no flight):
+out-of-catalogue verdicts read the diagnosis defensively, catalogue cases are held to the
+exact set and 10% parameter error, cases of too little data to a refusal."""
 
 from __future__ import annotations
 
@@ -116,3 +116,48 @@ def test_passes_run_along_x_when_fitting_and_along_y_when_held_out_and_pads_are_
     assert tuple(speeds) == PASS_SPEEDS_M_S
     on, off = ends("pad", 100)[-1], ends("pad", 1)[-1]  # where each lands
     assert on[:2] == list(PAD_XY_M) and off[:2] == [-PAD_XY_M[0], PAD_XY_M[1]]
+
+
+def test_a_torque_is_located_by_its_pattern_of_rotor_errors_and_asks_no_force_shrink():
+    case = CASES["ooc_yaw_torque"]
+    parse_effects([dict(e) for e in real_effects(case)], case.name)
+    patterns = {"yaw": {"share": -0.03, "significant": True},
+                "collective": {"share": 0.001, "significant": False}}  # fmt: skip
+    r = result(unexplained={"share": 0.1, "where": []}, rotors={"patterns": patterns})
+    v = score(case, r)["uncatalogued"]
+    assert v["located"] is True and v["learned_shrink_ok"] and v["passed"]
+    patterns["yaw"]["significant"] = False
+    assert not score(case, r)["uncatalogued"]["passed"]
+
+
+def test_logs_too_short_to_fit_must_be_refused_saying_what_is_missing():
+    from mission.campaigns.gap_bench import refused
+
+    case = CASES["short_fitting_logs"]
+    assert case.refused and case.cut_s == (1.5, None)
+    said = refused(case, "too little flight to fit: the fitting logs hold 2.90 s airborne "
+                   "and usable (...); at least 4 s in all is needed")  # fmt: skip
+    assert said["refusal"]["passed"]
+    diagnosed = score(case, result())  # a diagnosis where a refusal was due
+    assert diagnosed["refusal"] == {"expected": True, "message": None, "passed": False}
+    scores = {"cases": [said, diagnosed], "summary": None}
+    scores["summary"] = summarise(scores["cases"], [case, case])
+    assert scores["summary"]["refused_as_expected"] == [True, False]
+    text = table(scores)
+    assert "PASS: refused: too little flight" in text and "fail: refused: not refused" in text
+
+
+def test_a_log_is_cut_about_its_middle(tmp_path):
+    import numpy as np
+
+    from learner.flightlogs.flightlog import FlightLog, write_log
+    from learner.flightlogs.readers import read_log
+    from mission.campaigns.gap_flights import cut_log
+
+    n = 1001  # 10 s at 100 Hz
+    t = np.arange(n) * 0.01
+    z = np.zeros((n, 3))
+    up = np.tile([0.0, 0.0, 1.0], (n, 1))
+    log = FlightLog("full", t, up, z, np.tile([1.0, 0, 0, 0], (n, 1)), z, np.full((n, 4), 2e3))
+    cut = read_log(cut_log(write_log(log, tmp_path / "full.csv"), 1.5, tmp_path / "cut.csv"))
+    assert abs(cut.time_s[0] - 4.25) < 0.011 and abs(cut.time_s[-1] - 5.75) < 0.011

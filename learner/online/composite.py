@@ -214,24 +214,28 @@ def kalman(
     return a, p
 
 
-def bounded(a: np.ndarray, others: np.ndarray, layer_bound: float) -> np.ndarray:
-    """The vertical row projected so that the last layer keeps its spectral-norm bound
-    (`others`: the lateral rows, unchanged)."""
-    w = np.vstack([others, a[None, :-1]])
-    sigma = float(np.linalg.norm(w, 2))
-    if sigma <= layer_bound:
+def bounded(
+    a: np.ndarray, others: np.ndarray, layer_bound: float, anchor: np.ndarray
+) -> np.ndarray:
+    """The vertical row (weights and bias) moved back towards `anchor` (the home ground, which
+    keeps the bound) until the last layer keeps its spectral-norm bound (`others`: the
+    lateral rows, unchanged). Shrinking the change, not the weights alone, keeps what the
+    prior holds: a change the prior allows little far from the surface stays small there
+    (scaling the weights and leaving the bias would move the prediction everywhere)."""
+
+    def norm(row: np.ndarray) -> float:
+        return float(np.linalg.norm(np.vstack([others, row[None, :-1]]), 2))
+
+    if norm(a) <= layer_bound:
         return a
-    row = a.copy()
-    # scale the vertical row alone until the bound holds (bisection: the norm is monotone)
-    lo, hi = 0.0, 1.0
+    lo, hi = 0.0, 1.0  # the share of the change kept (bisection: the norm is convex in it)
     for _ in range(40):
         mid = 0.5 * (lo + hi)
-        if np.linalg.norm(np.vstack([others, mid * a[None, :-1]]), 2) <= layer_bound:
+        if norm(anchor + mid * (a - anchor)) <= layer_bound:
             lo = mid
         else:
             hi = mid
-    row[:-1] = lo * a[:-1]
-    return row
+    return anchor + lo * (a - anchor)
 
 
 def best_stored(
@@ -278,7 +282,8 @@ def composite_update(
     errors as standardised forces per gain): the new state and what was published."""
     previous = state.estimate
     a, p = kalman(state.estimate, state.covariance, state.prior, phi, y, tracking, config)
-    a = bounded(a, lateral_rows, config.layer_bound)
+    anchor = next(g.coefficients for g in state.grounds if g.protected)
+    a = bounded(a, lateral_rows, config.layer_bound, anchor)
     # the tests judge the composite target: the measured force and the tracking error's
     wp = np.concatenate([state.window_phi, phi])[-config.window :]
     wy = np.concatenate([state.window_y, y + config.tracking_gain * tracking])[-config.window :]

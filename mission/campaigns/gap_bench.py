@@ -18,7 +18,13 @@ from learner.gap.numbers import finite
 from mission.campaigns.gap_bench_cases import Case, real_effects
 from mission.campaigns.gap_bench_ooc import summary as ooc_summary
 from mission.campaigns.gap_bench_ooc import verdict, verdict_text
-from mission.campaigns.gap_flights import AUTOPILOT_PARAMS, BENCH_NOISE, bench_mission, real_log
+from mission.campaigns.gap_flights import (
+    AUTOPILOT_PARAMS,
+    BENCH_NOISE,
+    bench_mission,
+    cut_log,
+    real_log,
+)
 from simbridge.vehicle import load_vehicle
 
 FIT_SEEDS = (0, 1)
@@ -59,19 +65,55 @@ def run_case(case: Case, out: Path, replay: bool = True, record: bool = False) -
     vehicle = load_vehicle({**BASE, **case.world}["vehicle"])
     missions = {s: bench_mission(case.kind, s, ceiling, vehicle) for s in FIT_SEEDS + HOLD_SEEDS}
     _drop_stale_flights(folder, real.read_text() + repr(missions) + repr(AUTOPILOT_PARAMS))
-    logs = {}
-    for seed, mission in missions.items():
-        path = folder / f"flight{seed}.csv"
-        logs[seed] = real_log(mission, real, path, BENCH_NOISE, seed, record)
-    result = run_diagnosis(
-        [logs[s] for s in FIT_SEEDS],
-        [logs[s] for s in HOLD_SEEDS],
-        str(nominal),
-        folder / "diagnosis",
-        folds=len(FIT_SEEDS),
-        replay=replay,
-    )
+    logs = {
+        seed: _log(case, folder, seed, mission, real, record) for seed, mission in missions.items()
+    }
+    try:
+        result = run_diagnosis(
+            [logs[s] for s in FIT_SEEDS],
+            [logs[s] for s in HOLD_SEEDS],
+            str(nominal),
+            folder / "diagnosis",
+            folds=len(FIT_SEEDS),
+            replay=replay,
+        )
+    except ValueError as refusal:  # the diagnosis's refusal, saying what is missing
+        if not case.refused:
+            raise
+        return refused(case, str(refusal))
     return score(case, result)
+
+
+def _log(
+    case: Case, folder: Path, seed: int, mission: dict[str, Any], real: Path, record: bool
+) -> Path:
+    """The log of one of the case's flights that the diagnosis reads: the noisy CSV, or
+    groundfx's recording of the flight; cut where the case says."""
+    path = folder / f"flight{seed}.csv"
+    recording = path.with_suffix(".truth.rrd")
+    if case.logs == "recording" and path.exists() and not recording.exists():
+        path.unlink()  # flown before without its recording: fly it again, recorded
+    log = real_log(mission, real, path, BENCH_NOISE, seed, record or case.logs == "recording")
+    if case.logs == "recording":
+        log = recording
+    seconds = case.cut_s[0] if seed in FIT_SEEDS else case.cut_s[1]
+    if seconds is None:
+        return log
+    return cut_log(log, seconds, folder / f"flight{seed}.cut{seconds:g}s.csv")
+
+
+def refused(case: Case, message: str) -> dict[str, Any]:
+    """A case whose logs are too short to fit: the diagnosis refused, saying what is
+    missing (airborne seconds)."""
+    return {
+        "case": case.name, "truth": sorted(case.truth), "reported": [], "exact": None,
+        "max_relative_error": None, "catalogue_target": None, "uncatalogued": None,
+        "unexcited_reported_not_identifiable": None, "effects": {}, "force_shrink": None,
+        "force_before_n": None, "rollout_shrink": None, "closed_loop": None,
+        "false_alarm": None,
+        "refusal": {"expected": True, "message": message,
+                    "passed": "airborne" in message and "needed" in message},
+    }  # fmt: skip
 
 
 def score(case: Case, result: dict[str, Any]) -> dict[str, Any]:
@@ -131,6 +173,8 @@ def score(case: Case, result: dict[str, Any]) -> dict[str, Any]:
         "rollout_shrink": gap.get("rollout_rms_m", {}).get("shrink"),
         "closed_loop": result.get("closed_loop"),
         "false_alarm": bool(reported_set) if not case.truth and not case.uncatalogued else None,
+        # expected a refusal, got a diagnosis
+        "refusal": {"expected": True, "message": None, "passed": False} if case.refused else None,
     }
 
 
@@ -192,9 +236,17 @@ def _key(case: Case, replay: bool, source: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def refusal_text(refusal: dict[str, Any]) -> str:
+    """One table cell: a case that had to be refused."""
+    verdict_word = "PASS" if refusal["passed"] else "fail"
+    return f"{verdict_word}: refused: {refusal['message'] or 'not refused'}"
+
+
 def _line(r: dict[str, Any]) -> str:
     if "error" in r:
         return r["error"]
+    if r.get("refusal"):
+        return refusal_text(r["refusal"])
     if r.get("uncatalogued"):
         return f"out of the catalogue: {verdict_text(r['uncatalogued'])}"
     return (
@@ -208,7 +260,8 @@ def _mark(flag: bool | None) -> str:
 
 
 def summarise(results: list[dict[str, Any]], cases: list[Case]) -> dict[str, Any]:
-    ok = [r for r in results if "error" not in r]
+    refusals = [r["refusal"]["passed"] for r in results if r.get("refusal")]
+    ok = [r for r in results if "error" not in r and not r.get("refusal")]
     by_case = {c.name: c for c in cases}
     exact = [r["exact"] for r in ok if r.get("exact") is not None]
     target = [r["catalogue_target"] for r in ok if r.get("catalogue_target") is not None]
@@ -253,6 +306,7 @@ def summarise(results: list[dict[str, Any]], cases: list[Case]) -> dict[str, Any
         "unexcited_not_identifiable": [
             r["unexcited_reported_not_identifiable"] for r in ok if by_case[r["case"]].unexcited
         ],
+        "refused_as_expected": refusals,
     }
 
 
@@ -265,9 +319,11 @@ def table(scores: dict[str, Any]) -> str:
             continue
         ooc = r.get("uncatalogued")
         what = verdict_text(ooc) if ooc else ", ".join(r["reported"]) or "-"
+        if r.get("refusal"):
+            what = refusal_text(r["refusal"])
         lines.append(
             f"{r['case']:25s} {_mark(r['exact']):5s}  {_mark(r.get('catalogue_target')):5s}"
-            f"  {r['force_shrink'] * 100:8.0f}%     {what}"
+            f"  {_n(r['force_shrink'], '8.0f', 100, '%')}     {what}"
         )
     effects = ["", "effect               F1 (single)  median param error  coverage95"]
     for e, f in s["f1_single"].items():
@@ -289,6 +345,8 @@ def table(scores: dict[str, Any]) -> str:
         f"{s['false_alarm_rate']}; unexcited reported not identifiable "
         f"{s['unexcited_not_identifiable']}; wall {_n(scores.get('wall_s'), '.0f')} s",
     ]
+    if s.get("refused_as_expected"):
+        lines.append(f"refused as they had to be: {s['refused_as_expected']}")
     t, u = s.get("catalogue_target_rate"), s.get("uncatalogued") or {}
     lines.append(
         f"catalogue cases with the exact set and every parameter within 10%: {_n(t, '.2f')}"

@@ -5,10 +5,12 @@ name it, so it is scored on what it says about it instead:
   `unexplained.where` with the expected variable and component, its bin starting below a
   bound; for the time since take-off, also a significant falling trend in the whole-flight
   summaries), or, for a weak rotor, a significant negative thrust error on that rotor (a
-  positive one for a rotor stronger than modelled);
+  positive one for a rotor stronger than modelled), or, for a torque, a significant pattern
+  of the rotors' errors (the yaw pair against the other);
 - no catalogue effect declared present with confidence (`confident`, true when absent);
 - the unexplained share reported (a number);
-- the learnt residual shrinks the held-out force gap by at least LEARNED_SHRINK_MIN.
+- the learnt residual shrinks the held-out force gap by at least LEARNED_SHRINK_MIN (a
+  torque-only effect, located by its pattern of rotor errors, leaves no force to learn).
 
 The diagnosis result is read defensively: a field it does not (yet) carry reads "missing"
 (None), and a case with a missing figure does not pass.
@@ -42,6 +44,14 @@ def located(expected: tuple[Any, ...], result: dict[str, Any]) -> bool | None:
     """Whether the diagnosis places the residual where the effect acts; None: not reported."""
     if not expected:
         return None
+    if expected[0] == "pattern":  # a pattern of the rotors' errors: a torque, named
+        patterns = ((result.get("summaries") or {}).get("rotors") or {}).get("patterns")
+        if not isinstance(patterns, dict) and isinstance(result.get("rotors"), dict):
+            patterns = result["rotors"].get("patterns")
+        if not isinstance(patterns, dict):
+            return None
+        pattern = patterns.get(expected[1]) or {}
+        return bool(pattern.get("significant"))
     if expected[0] == "rotor":
         rotors = _rotors(result)
         if rotors is None:
@@ -80,6 +90,9 @@ def verdict(expected: tuple[Any, ...], result: dict[str, Any]) -> dict[str, Any]
     where = located(expected, result)
     share_ok = isinstance(share, int | float) and math.isfinite(share)
     shrink_ok = None if shrink is None else bool(shrink >= LEARNED_SHRINK_MIN)
+    if expected and expected[0] == "pattern":
+        # a torque: no force for a residual to learn, so no shrink to ask of it
+        shrink_ok = True
     return {
         "expected_regime": list(expected),
         "located": where,

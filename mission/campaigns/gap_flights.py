@@ -4,11 +4,13 @@ closed-loop replays of held-out missions in the nominal and corrected worlds."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import random
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from learner.flightlogs.flightlog import FlightLog, add_noise, write_log
@@ -258,6 +260,20 @@ def real_log(
     log = read_log(clean)
     noisy: FlightLog = add_noise(log, noise, seed)
     return write_log(noisy, out)
+
+
+def cut_log(path: Path, seconds: float, out: Path) -> Path:
+    """The log at `path` cut to `seconds` about its middle (where the vehicle is in the air),
+    as a user would bring a log that stopped early."""
+    log = read_log(path)
+    middle = 0.5 * (log.time_s[0] + log.time_s[-1])
+    keep = np.abs(log.time_s - middle) <= 0.5 * seconds
+    rows = {
+        f.name: getattr(log, f.name)[keep]
+        for f in dataclasses.fields(log)
+        if isinstance(getattr(log, f.name), np.ndarray)
+    }
+    return write_log(dataclasses.replace(log, **rows), out)
 
 
 def replay_params(meta: dict[str, Any]) -> tuple[str, ...]:
