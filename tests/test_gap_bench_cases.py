@@ -161,3 +161,16 @@ def test_a_log_is_cut_about_its_middle(tmp_path):
     log = FlightLog("full", t, up, z, np.tile([1.0, 0, 0, 0], (n, 1)), z, np.full((n, 4), 2e3))
     cut = read_log(cut_log(write_log(log, tmp_path / "full.csv"), 1.5, tmp_path / "cut.csv"))
     assert abs(cut.time_s[0] - 4.25) < 0.011 and abs(cut.time_s[-1] - 5.75) < 0.011
+
+
+def test_own_recordings_are_read_without_a_shift_or_a_trend_left():
+    case = CASES["own_recordings_rho2"]
+    assert case.logs == "recording" and case.truth == {"ground_effect": {"rho": 2.0}}
+    trend = {"significant": True, "after_catalogue_share_per_min": -0.016,
+             "floor_share_per_min": 0.43}  # fmt: skip
+    own = score(case, result(summaries={"trend": trend}))["own_recordings"]
+    assert own["passed"] and own["shifted"] == []
+    shifted = score(case, result(summaries={"trend": trend}, z_offsets_m={"flight0": 0.0056}))
+    assert not shifted["own_recordings"]["passed"]
+    trend["after_catalogue_share_per_min"] = 0.5
+    assert not score(case, result(summaries={"trend": trend}))["own_recordings"]["passed"]

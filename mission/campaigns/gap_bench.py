@@ -173,6 +173,7 @@ def score(case: Case, result: dict[str, Any]) -> dict[str, Any]:
         "rollout_shrink": gap.get("rollout_rms_m", {}).get("shrink"),
         "closed_loop": result.get("closed_loop"),
         "false_alarm": bool(reported_set) if not case.truth and not case.uncatalogued else None,
+        "own_recordings": read_exactly(result) if case.logs == "recording" else None,
         # expected a refusal, got a diagnosis
         "refusal": {"expected": True, "message": None, "passed": False} if case.refused else None,
     }
@@ -234,6 +235,20 @@ def _key(case: Case, replay: bool, source: str) -> str:
     """What decides a case's scores: its definition, the bench's flights and the code."""
     text = repr((case, replay, AUTOPILOT_PARAMS, BENCH_NOISE, FIT_SEEDS, HOLD_SEEDS, source))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def read_exactly(result: dict[str, Any]) -> dict[str, Any]:
+    """groundfx's own recordings carry their frame and ground: the diagnosis shifts none of
+    them, and no trend over the flight is left once the named effects are in."""
+    trend = (result.get("summaries") or {}).get("trend") or {}
+    left = trend.get("after_catalogue_share_per_min")
+    floor = trend.get("floor_share_per_min")
+    shifted = sorted(result.get("z_offsets_m") or {})
+    no_trend = not trend.get("significant") or (
+        finite(left) and finite(floor) and abs(left) < floor
+    )
+    return {"shifted": shifted, "trend_left_share_per_min": left, "trend_floor": floor,
+            "passed": bool(no_trend and not shifted)}  # fmt: skip
 
 
 def refusal_text(refusal: dict[str, Any]) -> str:
@@ -321,6 +336,11 @@ def table(scores: dict[str, Any]) -> str:
         what = verdict_text(ooc) if ooc else ", ".join(r["reported"]) or "-"
         if r.get("refusal"):
             what = refusal_text(r["refusal"])
+        own = r.get("own_recordings")
+        if own:
+            verdict_word = "PASS" if own["passed"] else "fail"
+            what += f" ({verdict_word}: shifted {own['shifted'] or '-'}, trend left "
+            what += f"{_n(own['trend_left_share_per_min'], '.1f', 100, '%/min')})"
         lines.append(
             f"{r['case']:25s} {_mark(r['exact']):5s}  {_mark(r.get('catalogue_target')):5s}"
             f"  {_n(r['force_shrink'], '8.0f', 100, '%')}     {what}"

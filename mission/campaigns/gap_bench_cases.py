@@ -379,12 +379,13 @@ def _using_it() -> list[Case]:
     name, logs too short to fit or to hold out, groundfx's own recordings."""
     rho2 = {"name": "ground_effect", "rho": 2.0}
     return [
-        # the yaw pair's thrusts 6% apart: a yaw moment the rotors' model lacks (unlike
-        # propellers), which the yaw loop balances with commands that leave the total thrust
-        # within 0.4% of the model's: a torque and next to no force
+        # the yaw pairs' thrusts 6% above and 5% below the model (unlike propellers): a yaw
+        # moment the rotors' model lacks. The yaw loop balances it (s0 n0^2 = s1 n1^2), and
+        # the total thrust is then the model's times the scales' harmonic mean, 1 for
+        # s1 = s0 / (2 s0 - 1): a torque and no force
         Case(
             "ooc_yaw_torque",
-            ({"name": "rotor_asymmetry", "scales": [1.06, 0.94, 1.06, 0.94]},),
+            ({"name": "rotor_asymmetry", "scales": [1.06, 1.06 / 1.12, 1.06, 1.06 / 1.12]},),
             {},
             uncatalogued=True,
             expected_regime=("pattern", "yaw"),
