@@ -31,6 +31,8 @@ MEASURES = {  # the error measures of the report: key in a flight summary -> (la
     "landing_error_m": ("landing position error", "mm", 1000.0),
     "touchdown_speed_m_s": ("touchdown speed", "m/s", 1.0),
     "sim_s": ("flight time", "s", 1.0),
+    # predicted minus true vertical ground-effect force over the hold: the model, not the loop
+    "ge_z_hold_rms_error_n": ("model error over the hold", "mN", 1000.0),
 }
 PRIMARY = "hold_z_rms_error_m"
 

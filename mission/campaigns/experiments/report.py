@@ -39,7 +39,8 @@ def _fmt(value: float, measure: str) -> str:
 
 
 def _digits(measure: str) -> int:
-    return {"hold_z_rms_error_m": 2, "landing_error_m": 1, "touchdown_speed_m_s": 3}.get(measure, 1)
+    digits = {"hold_z_rms_error_m": 2, "landing_error_m": 1, "touchdown_speed_m_s": 3}
+    return digits.get(measure, 1)
 
 
 def _cell(values: np.ndarray, measure: str) -> str:
@@ -177,21 +178,25 @@ def experiment_report(
 def summary_table(
     experiments: list[Experiment], all_values: dict[str, dict[str, dict[str, np.ndarray]]]
 ) -> list[str]:
-    """One row per condition: the primary measure, landing error and touchdown speed."""
+    """One row per condition: the primary measure, landing error, touchdown speed and the
+    model's error over the hold (predicted minus true force, where a model flies)."""
     lines = [
-        "| experiment | condition | n | hold z RMS [mm] | landing error [mm] | touchdown [m/s] |",
-        "|---|---|---|---|---|---|",
+        "| experiment | condition | n | hold z RMS [mm] | landing error [mm] | touchdown [m/s] "
+        "| model error over the hold [mN] |",
+        "|---|---|---|---|---|---|---|",
     ]
+    model = "ge_z_hold_rms_error_n"
     for e in experiments:
         values = all_values.get(e.key)
         if not values:
-            lines.append(f"| {e.key} | not run | | | | |")
+            lines.append(f"| {e.key} | not run | | | | | |")
             continue
         for c in e.conditions:
             v = values[c.name]
             lines.append(
                 f"| {e.key} | `{c.name}` | {len(v[PRIMARY])} | {_cell(v[PRIMARY], PRIMARY)} | "
                 f"{_cell(v['landing_error_m'], 'landing_error_m')} | "
-                f"{_cell(v['touchdown_speed_m_s'], 'touchdown_speed_m_s')} |"
+                f"{_cell(v['touchdown_speed_m_s'], 'touchdown_speed_m_s')} | "
+                f"{_cell(v[model], model) if c.flights[-1].model != 'none' else 'n/a'} |"
             )
     return lines
