@@ -306,3 +306,15 @@ def test_the_summary_gives_the_replays_figure_and_warns_where_the_corrected_worl
     assert worse is not None and "shrink -50%" in worse
     assert "the corrected world flies further from the logged flights" in worse
     assert closed_loop_line({"status": "skipped", "why": "not asked for"}) is None
+
+
+def test_a_force_gap_within_the_noise_floor_is_said_to_be_so_not_to_lack_structure():
+    from learner.gap.diagnose import force_within_floor
+
+    gap = {"force_rms_n": {"before": 0.00082},
+           "force_rms_n_measured_floor": {"before": 0.0, "floor": 0.0022}}  # fmt: skip
+    said = force_within_floor(gap)
+    assert said is not None and "0.82 mN" in said and "2.20 mN" in said
+    gap["force_rms_n_measured_floor"]["before"] = 0.0004
+    assert force_within_floor(gap) is None
+    assert force_within_floor({"force_rms_n": {"before": 0.01}}) is None  # no held-out flights

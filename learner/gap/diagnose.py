@@ -226,6 +226,9 @@ def diagnose(
     unexplained["disagreement"] = disagree
     if hold_problem is not None:
         gap["force_rms_n_learned"] = held_out_learned(hold_problem, best.values, left.model)
+    within = force_within_floor(gap)
+    if within:  # nothing to tell structure from noise in: say so, not "no structure"
+        unexplained.update(structure=False, significant=False, explained=True, sentence=within)
     mark_confidence(effects, unexplained)
     per_flight_values(effects, all_data, nominal, vehicle, best)
     members = corrected_members(effects, best.values, vehicle)
@@ -338,6 +341,21 @@ def held_out_gap(problem: gapfit.Problem, values: Values) -> dict[str, Any]:
     out["torque_rms_n_m"] = torque_gap(problem.flights, problem.nominal, corrected, problem.vehicle)
     out["regions"] = _per_region(problem, after)
     return out
+
+
+def force_within_floor(gap: dict[str, Any]) -> str | None:
+    """A sentence where the nominal world's force gap on the held-out flights is within their
+    measured noise floor: there is no force left to explain (a torque may still be: the
+    rotors' rule says)."""
+    measured = gap.get("force_rms_n_measured_floor") or {}
+    if measured.get("before") is None or measured["before"] > 0.0:
+        return None
+    before = gap["force_rms_n"]["before"]
+    return (
+        f"the force gap ({before * 1e3:.2f} mN) is within the held-out flights' measured noise "
+        f"floor ({measured['floor'] * 1e3:.2f} mN): no force is left for the catalogue or a "
+        "network to explain"
+    )
 
 
 def measured_floor_gap(

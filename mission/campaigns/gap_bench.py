@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import shutil
+import time
 from pathlib import Path
 from typing import Any
 
@@ -68,6 +69,7 @@ def run_case(case: Case, out: Path, replay: bool = True, record: bool = False) -
     logs = {
         seed: _log(case, folder, seed, mission, real, record) for seed, mission in missions.items()
     }
+    started = time.perf_counter()
     try:
         result = run_diagnosis(
             [logs[s] for s in FIT_SEEDS],
@@ -81,7 +83,8 @@ def run_case(case: Case, out: Path, replay: bool = True, record: bool = False) -
         if not case.refused:
             raise
         return refused(case, str(refusal))
-    return score(case, result)
+    # what a user waits for: the diagnosis, its flights already flown
+    return {**score(case, result), "diagnosis_wall_s": time.perf_counter() - started}
 
 
 def _log(
@@ -169,6 +172,11 @@ def score(case: Case, result: dict[str, Any]) -> dict[str, Any]:
         "unexcited_reported_not_identifiable": unexcited_ok if case.unexcited else None,
         "effects": per,
         "force_shrink": gap["force_rms_n"]["shrink"],
+        # the story: does the learnt residual find structure the catalogue leaves?
+        "structure": (result.get("unexplained") or {}).get("structure"),
+        "torque_shrink": (gap.get("torque_rms_n_m") or {}).get("shrink"),
+        # with the learnt residual beside the catalogue's effects (offered or not)
+        "learned_shrink": (gap.get("force_rms_n_learned") or {}).get("shrink"),
         "force_before_n": gap["force_rms_n"]["before"],
         "rollout_shrink": gap.get("rollout_rms_m", {}).get("shrink"),
         "closed_loop": result.get("closed_loop"),
@@ -263,10 +271,12 @@ def _line(r: dict[str, Any]) -> str:
     if r.get("refusal"):
         return refusal_text(r["refusal"])
     if r.get("uncatalogued"):
-        return f"out of the catalogue: {verdict_text(r['uncatalogued'])}"
+        wall = _n(r.get("diagnosis_wall_s"), ".0f")
+        return f"out of the catalogue: {verdict_text(r['uncatalogued'])}; diagnosis {wall} s"
     return (
         f"truth {r['truth']} reported {r['reported']} exact {r['exact']} "
-        f"force shrink {r['force_shrink'] * 100:.0f}%"
+        f"force shrink {r['force_shrink'] * 100:.0f}%; diagnosis "
+        f"{_n(r.get('diagnosis_wall_s'), '.0f')} s"
     )
 
 

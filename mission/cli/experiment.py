@@ -56,12 +56,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     for e in experiments:
         _, values, rows = report.experiment_report(e, plans[e.key], results, args.out / e.key)
         all_values[e.key] = values
-        verdict_lines += [
-            f"- {e.key} `{r['expectation'].a}` vs `{r['expectation'].b}` "
-            f"({r['expectation'].claim}): {r['verdict']} (a - b = {r['diff'] * 1000:.2f} mm, "
-            f"p = {r['p']:.2g})"
-            for r in rows
-        ]
+        verdict_lines += [report.verdict_line(e.key, r) for r in rows]
     unfinished = sum(1 for t in trials if t.id not in results)
     wall_s = time.perf_counter() - t0
     table = report.summary_table(experiments, all_values)

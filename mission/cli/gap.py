@@ -118,6 +118,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     unexplained = result.get("unexplained") or {}
     if unexplained.get("sentence"):
         print(f"unexplained: {unexplained['sentence']}")
+    rotors = (result.get("summaries") or {}).get("rotors") or {}
+    if rotors.get("rule"):
+        print(f"rotors: {rotors['rule']}")
     if unexplained.get("disagreement"):
         print(f"flights: {unexplained['disagreement']['sentence']}")
     offer = unexplained.get("learned_world")

@@ -64,24 +64,35 @@ def _g(g: float) -> str:
 def expectation_rows(
     experiment: Experiment, values: dict[str, dict[str, np.ndarray]]
 ) -> list[dict[str, Any]]:
-    """Each expectation with its comparison on the primary measure and the verdict."""
+    """Each expectation with its comparison on its measure and the verdict."""
     rows = []
     for e in experiment.expectations:
-        a, b = values[e.a][PRIMARY], values[e.b][PRIMARY]
+        a, b = values[e.a][e.measure], values[e.b][e.measure]
         nothing = {"diff": np.nan, "t": np.nan, "p": np.nan, "g": np.nan}
         cmp = compare(a, b) if len(a) and len(b) else nothing
         rows.append({"expectation": e, **cmp, "verdict": verdict(e.relation, cmp)})
     return rows
 
 
+def verdict_line(key: str, row: dict[str, Any]) -> str:
+    """One expectation's verdict in the summary: the difference in its measure's unit."""
+    e = row["expectation"]
+    _, unit, scale = MEASURES[e.measure]
+    return (
+        f"- {key} `{e.a}` vs `{e.b}` ({e.claim}): {row['verdict']} "
+        f"(a - b = {row['diff'] * scale:.2f} {unit}, p = {row['p']:.2g})"
+    )
+
+
 def _conclusion(row: dict[str, Any], values: dict[str, dict[str, np.ndarray]]) -> str:
     e = row["expectation"]
-    a, b = values[e.a][PRIMARY], values[e.b][PRIMARY]
-    ma = _fmt(float(a.mean()) if len(a) else np.nan, PRIMARY)
-    mb = _fmt(float(b.mean()) if len(b) else np.nan, PRIMARY)
+    a, b = values[e.a][e.measure], values[e.b][e.measure]
+    ma = _fmt(float(a.mean()) if len(a) else np.nan, e.measure)
+    mb = _fmt(float(b.mean()) if len(b) else np.nan, e.measure)
     rel = "lower than" if e.relation == "lower" else "no different from"
     said = f"expected `{e.a}` {rel} `{e.b}` ({e.claim})"
-    data = f"{ma} mm against {mb} mm, p = {_p(row['p'])}, g = {_g(row['g'])}"
+    unit = MEASURES[e.measure][1]
+    data = f"{ma} {unit} against {mb} {unit}, p = {_p(row['p'])}, g = {_g(row['g'])}"
     if row["verdict"] == "supported":
         return f"- The data support it: {said}: {data}."
     if row["verdict"] == "contradicted":
@@ -155,17 +166,19 @@ def experiment_report(
         "",
         f"![errors]({plot.name})",
         "",
-        f"## Comparisons ({MEASURES[PRIMARY][0]}; Welch t-test, Hedges's g of a - b)",
+        "## Comparisons (Welch t-test, Hedges's g of a - b)",
         "",
-        "| a | b | expected | a - b [mm] | t | p | g | verdict |",
-        "|---|---|---|---|---|---|---|---|",
+        "| a | b | expected | measure | a - b | t | p | g | verdict |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         e = r["expectation"]
         t = "n/a" if not np.isfinite(r["t"]) else f"{r['t']:.2f}"
+        label, unit, _ = MEASURES[e.measure]
         lines.append(
-            f"| `{e.a}` | `{e.b}` | {e.relation}: {e.claim} | {_fmt(r['diff'], PRIMARY)} | {t} "
-            f"| {_p(r['p'])} | {_g(r['g'])} | {r['verdict']} |"
+            f"| `{e.a}` | `{e.b}` | {e.relation}: {e.claim} | {label} | "
+            f"{_fmt(r['diff'], e.measure)} {unit} | {t} | {_p(r['p'])} | {_g(r['g'])} | "
+            f"{r['verdict']} |"
         )
     lines += ["", "## Conclusions", "", *(_conclusion(r, values) for r in rows)]
     if missing:
