@@ -186,9 +186,9 @@ def test_flights_that_disagree_on_a_landing_pad_put_the_position_among_the_input
 ) -> None:
     """A pad (0.6 m around x = 1 m) lifts 0.3 W exp(-h / 0.1 m) where the floor around it
     does nothing: one fitting flight low over the pad, one beside it, the held-out flight over
-    the pad. The flights disagree within a height regime, said so, and the learnt residual,
-    with the position among its inputs, removes more on the held-out flight than on the
-    state alone (35% on this case)."""
+    the pad. The flights disagree within a height regime, said so with where each flew, and
+    the learnt residual, with the position among its inputs, removes more on the held-out
+    flight than on the state alone (35% on this case)."""
     world = world_file(tmp_path / "world.yaml")
 
     def over(log: FlightLog, x_m: float) -> FlightLog:
@@ -211,6 +211,9 @@ def test_flights_that_disagree_on_a_landing_pad_put_the_position_among_the_input
     u = figures["unexplained"]
     said = u["disagreement"]
     assert said is not None and said["per_flight_share"]["f0"] > said["per_flight_share"]["f1"]
+    # where each flew that height: the one that pushes harder over the pad at x = 1 m
+    places = said["per_flight_position_m"]
+    assert abs(places["f0"][0] - 1.0) < 0.3 and abs(places["f1"][0] + 1.0) < 0.3, places
     assert said["sentence"] in figures["rules"] and f"flights: {said['sentence']}" in summary
     assert u["structure"] and "position" in u["carried_by"], u["inputs"]
     assert u["learnt_gain"] >= 0.5

@@ -8,6 +8,9 @@ it in another, reads as a weak mean in the height bin both share. Flights that d
 beyond their own spread in one regime point to what the regime's variables leave out, the
 place first of all: the learnt residual then takes the position among its inputs.
 
+Where they disagree, each flight's mean position over the bin's rows is given beside its
+mean (the position regime: a pad shows as the place the flights that push harder flew over).
+
 Each flight's mean over a bin carries a standard error from its blocks of BLOCK_S (the
 residual is correlated over a block, not over a row); Q = sum w_i (m_i - m)^2 with w = 1/se^2
 is chi-square with k - 1 degrees of freedom where the flights agree. A disagreement needs a
@@ -61,12 +64,13 @@ def flights_disagree(
     vertical = [r[:, 2] / vehicle.weight_n for r in residuals]
     tests = []
     for k in range(len(edges) - 1):
-        per_flight = {}
+        per_flight, places = {}, {}
         for d, h, v in zip(flights, heights, vertical, strict=True):
             rows = (h >= edges[k]) & (h < edges[k + 1])
             m = _flight_mean(d, v, rows)
             if m is not None:
                 per_flight[d.name] = m
+                places[d.name] = [float(c) for c in d.position_m[rows, :2].mean(axis=0)]
         if len(per_flight) < 2:
             continue
         means = np.array([m for m, _ in per_flight.values()])
@@ -75,20 +79,25 @@ def flights_disagree(
         q = float(np.sum(w * (means - pooled) ** 2))
         p = float(chi2.sf(q, len(means) - 1))
         spread = float(means.max() - means.min())
-        tests.append((p, spread, k, {n: m for n, (m, _) in per_flight.items()}))
+        tests.append((p, spread, k, {n: m for n, (m, _) in per_flight.items()}, places))
     if not tests:
         return None
     found = [t for t in tests if t[0] * len(tests) < ALPHA and t[1] >= MIN_SPREAD]
     if not found:
         return None
-    p, spread, k, means = max(found, key=lambda t: t[1])
+    p, spread, k, means, places = max(found, key=lambda t: t[1])
     where = describe_range("height_r", float(edges[k]), float(edges[k + 1]))
-    each = ", ".join(f"{m * 100:+.1f}% on {name}" for name, m in means.items())
+    # the position regime: where each flight flew that height, so the place can be found
+    each = ", ".join(
+        f"{m * 100:+.1f}% on {name} (about x {places[name][0]:.2f}, y {places[name][1]:.2f} m)"
+        for name, m in means.items()
+    )
     return {
         "variable": "height_r",
         "low": float(edges[k]),
         "high": float(edges[k + 1]),
         "per_flight_share": means,
+        "per_flight_position_m": places,  # mean x, y over the bin's rows
         "spread_share": spread,
         "p_bonferroni": min(p * len(tests), 1.0),
         "sentence": (
