@@ -277,8 +277,8 @@ def test_a_ground_station_tunes_the_settings_the_learner_uses_within_their_decla
     names = sorted(n for n in ORDER if n.startswith("GFX_OL_"))
     assert names == [
         "GFX_OL_CONF", "GFX_OL_FORGET", "GFX_OL_LAMBDA", "GFX_OL_LR", "GFX_OL_MARGIN",
-        "GFX_OL_METHOD", "GFX_OL_PAUSE", "GFX_OL_RESET", "GFX_OL_RLS_P0", "GFX_OL_RLS_SC",
-        "GFX_OL_SETTLE", "GFX_OL_TRACK",
+        "GFX_OL_METHOD", "GFX_OL_MIN_CHG", "GFX_OL_PAUSE", "GFX_OL_RESET", "GFX_OL_RLS_P0",
+        "GFX_OL_RLS_SC", "GFX_OL_SETTLE", "GFX_OL_TRACK",
     ]  # fmt: skip
     assert ParamStore(None).online_settings() is None  # GFX_OL_METHOD 0: off
     numbered = range(int(SPECS["GFX_OL_METHOD"].hi) + 1)

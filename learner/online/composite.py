@@ -28,7 +28,8 @@ the lateral targets are measurement noise). In standardised units throughout.
   sample) passes the test within a fraction of a second. A change that passes is published
   once the estimate has converged (`settle`: its last batch improved its fit to the window
   by at most that much), not while it is still moving towards the data: an estimate
-  published on the way would be published again within the second.
+  published on the way would be published again within the second. A change smaller than
+  `min_change` (RMS of the prediction over the window) is not worth publishing.
 - Memory: the grounds known (the offline training grounds, protected, and every ground
   learnt in flight) are kept with their coefficients. A ground is identified by how it
   pushes where the vehicle is now: when a stored ground explains the last `recall_window`
@@ -75,6 +76,7 @@ class CompositeConfig:
     # fit to the window by at most this many noise variances (a moving estimate would be
     # published again within the second)
     settle: float
+    min_change: float  # the smallest RMS change of the prediction over the window published
     far_var: float  # the prior's variance of the prediction far from the surface
     size_sd: float  # the prior sd of a relative change of the effect's size
     layer_bound: float  # spectral norm of the last layer, kept
@@ -303,7 +305,9 @@ def composite_update(
     if best >= 0 and best_gain > threshold:
         return recall(state, best, best_gain)
     moving = (ssr(wp, wy, previous) - fresh) / sigma2
-    if gain <= config.confidence or moving > config.settle:
+    # a change too small to matter to the controller is not worth publishing, however sure
+    size = float(np.sqrt(np.mean((wp @ (a - state.published)) ** 2)))
+    if gain <= config.confidence or moving > config.settle or size < config.min_change:
         return state, Decision("held", gain, name)
     grounds = list(state.grounds)
     current, learnt, created = state.current, state.learnt, state.created

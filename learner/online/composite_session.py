@@ -40,6 +40,7 @@ def composite_config(
         window=settings.composite_window,
         recall_window=settings.composite_recall_window,
         settle=settings.composite_settle,
+        min_change=settings.composite_min_change_n / target_scale_n,
         far_var=(settings.composite_far_n / target_scale_n) ** 2,
         size_sd=settings.composite_size_sd,
         layer_bound=layer_bound,

@@ -154,6 +154,14 @@ class OnlineSettings:
     composite_recall_window: int = param(
         100, lo=8, hi=100000, doc="composite: recent samples a stored ground is judged on"
     )
+    composite_min_change_n: float = tunable(
+        "GFX_OL_MIN_CHG",
+        2e-3,
+        unit="N",
+        lo=0.0,
+        hi=1.0,
+        doc="composite: a change moves the prediction over the window by at least this RMS",
+    )
     composite_settle: float = tunable(
         "GFX_OL_SETTLE",
         1.0,
