@@ -302,9 +302,15 @@ def _online_lines(summary: dict[str, Any]) -> list[str]:
     why = ", ".join(f"{k} {v}" for k, v in reasons.items())
     held = summary.get("online_held")
     evidence = summary.get("online_held_evidence")
+    over = (evidence or {}).get("over_threshold") or 0
+    over_text = (
+        f"; {over} over it, held while the estimate converged or for a change too small"
+        if over
+        else ""
+    )
     held_text = (
         f"{held} held (likelihood ratio median {evidence['median']:.3g}, largest "
-        f"{evidence['max']:.4g}, against the threshold {evidence['threshold']:g}), "
+        f"{evidence['max']:.4g}, against the threshold {evidence['threshold']:g}{over_text}), "
         if held and evidence
         else (f"{held} held (evidence under the confidence threshold), " if held else "")
     )

@@ -303,3 +303,19 @@ def test_a_tour_reports_grounds_created_recalls_and_returns_against_first_visits
            "(first visit 9), hold 0.50 mm (first visit 0.90)" in lines  # fmt: skip
     refused = groundfx_in_process("learn", "tour", "--grounds", "rho1,grass")
     assert refused.returncode == 2 and "--grounds: 'grass' is not a ground" in refused.stderr
+
+
+def test_fly_says_how_many_updates_held_a_change_past_the_threshold():
+    """A change the evidence supports but that waits for the estimate to converge (or is too
+    small to publish) is not evidence under the threshold: `fly` counts those apart."""
+    from mission.fly import _online_lines
+
+    summary = {
+        "online_method": "composite", "online_mode": "asynchronous", "online_samples": 2262,
+        "online_updates": 123, "online_accepted": 2, "online_rejected": 0, "online_held": 121,
+        "online_held_evidence": {"median": 2.93, "max": 29.33, "threshold": 30.0,
+                                 "over_threshold": 4},
+    }  # fmt: skip
+    text = " ".join(_online_lines(summary))
+    assert "121 held (likelihood ratio median 2.93, largest 29.33, against the threshold 30" in text
+    assert "4 over it, held while the estimate converged or for a change too small" in text

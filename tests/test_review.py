@@ -56,12 +56,13 @@ def test_the_report_says_what_the_learner_did_and_why_it_published_little():
                "online_updates": 123, "online_accepted": 9, "online_rejected": 0,
                "online_held": 114, "online_version": 9, "online_ground": "learnt-1",
                "online_held_evidence": {"median": 0.24, "max": 29.97,
-                                        "threshold": 30.0}}  # fmt: skip
+                                        "threshold": 30.0, "over_threshold": 3}}  # fmt: skip
     a = answers(summary, {"online": "composite"}, s)
     assert "123 updates, 9 accepted" in a["learner"]["text"]
     assert (
         "114 held: the evidence for a change under its confidence threshold (likelihood ratio "
-        "median 0.24, largest 29.97, against 30)" in a["learner"]["text"]
+        "median 0.24, largest 29.97, against 30), 3 of them over it while the estimate "
+        "converged or for a change too small" in a["learner"]["text"]
     )
     assert a["hold"]["rms_mm"] == pytest.approx(1.0) and a["model"]["hold_rms_mn"] == 2.0
     offline = answers({"landed": False, "ended": "stopped"}, {"online": "off"}, s)

@@ -141,6 +141,11 @@ def learner_sentence(summary: dict[str, Any], meta: dict[str, Any]) -> str:
             if held
             else ""
         )
+        + (
+            f", {over} of them over it while the estimate converged or for a change too small"
+            if held and (over := (evidence or {}).get("over_threshold"))
+            else ""
+        )
         + (f"; active ground {ground}" if ground else "")
     )
 

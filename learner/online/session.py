@@ -208,10 +208,11 @@ class OnlineSession:
         self.counts[decision.kind] += 1
         threshold = self._composite_config.confidence
         if decision.kind == "held" and decision.statistic > threshold:
-            self.counts["settling"] += 1  # confident of a change, the estimate still moving
+            # confident of a change, but the estimate still moving or the change too small
+            self.counts["settling"] += 1
             self.last_verdict = (
                 f"held: likelihood ratio {decision.statistic:.3g} over the threshold "
-                f"{threshold:g}, the estimate still converging"
+                f"{threshold:g}, the estimate still converging or the change too small"
             )
             return None
         if decision.kind == "held":
@@ -236,6 +237,8 @@ class OnlineSession:
             "median": float(np.median(ratios)),
             "max": float(ratios.max()),
             "threshold": float(self._composite_config.confidence),
+            # over the threshold, held while the estimate converged or too small a change
+            "over_threshold": int(self.counts["settling"]),
         }
 
     def _publish_composite(self, t_s: float, loss: float | None) -> Snapshot:
