@@ -304,10 +304,13 @@ def composite_update(
     best, best_gain = best_stored(state, wp, wy, a, config)
     if best >= 0 and best_gain > threshold:
         return recall(state, best, best_gain)
+    if gain <= config.confidence:
+        return state, Decision("held", gain, name)
+    # sure of a change: publish it once the estimate has stopped moving, and only if it is
+    # large enough to matter to the controller
     moving = (ssr(wp, wy, previous) - fresh) / sigma2
-    # a change too small to matter to the controller is not worth publishing, however sure
     size = float(np.sqrt(np.mean((wp @ (a - state.published)) ** 2)))
-    if gain <= config.confidence or moving > config.settle or size < config.min_change:
+    if moving > config.settle or size < config.min_change:
         return state, Decision("held", gain, name)
     grounds = list(state.grounds)
     current, learnt, created = state.current, state.learnt, state.created
@@ -341,7 +344,7 @@ def recall(state: CompositeState, best: int, statistic: float) -> tuple[Composit
     grounds = list(state.grounds)
     recalled = grounds[best]
     merged = ""
-    if grounds[state.current].name == state.created and state.created:
+    if state.created and grounds[state.current].name == state.created:
         merged = grounds.pop(state.current).name
     state = replace(
         state,
