@@ -49,7 +49,7 @@ def learner_main(
         session.warm_up()
     except Exception as err:  # a bad model or setting: say so, end cleanly
         conn.send(("error", f"learner did not start: {err}"))
-        conn.send(("summary", {}, {}, None, None))
+        conn.send(("summary", {}, {}, None, None, None))
         return
     if session.snapshot.version > 0:  # composite starts on its home ground: publish it
         net = session.snapshot.net
@@ -100,7 +100,7 @@ def learner_main(
             conn.send(
                 (
                     "summary", dict(session.counts), dict(session.reject_reasons),
-                    session.last_loss, session.held_evidence(),
+                    session.last_loss, session.held_evidence(), session.known_grounds(),
                 )
             )  # fmt: skip
             conn.close()

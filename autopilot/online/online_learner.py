@@ -49,7 +49,10 @@ READY_TIMEOUT_S = 60.0  # the learner process imports torch: about 2 s, far more
 # (sim time, loss, version, what became of the update in words, the ground in use or None)
 Report = Callable[[float, float | None, int, str, str | None], None]
 # the learner's last word: counts, reject reasons, last loss, why updates were held
-Final = tuple[dict[str, int], dict[str, int], float | None, dict[str, float] | None]
+# counts, reject reasons, the last loss, the held evidence, composite's memory at the end
+Final = tuple[
+    dict[str, int], dict[str, int], float | None, dict[str, float] | None, dict[str, Any] | None
+]
 
 
 class OnlineLearner:
@@ -199,7 +202,7 @@ class OnlineLearner:
                 if self._final is None:
                     code = self._process.exitcode
                     self.errors.append(f"the learner process ended unexpectedly (exit {code})")
-                    self._final = ({}, {}, None, None)
+                    self._final = ({}, {}, None, None, None)
                 self._ready.set()
                 return
             kind = message[0]
@@ -220,7 +223,7 @@ class OnlineLearner:
             elif kind == "ready":
                 self._ready.set()
             elif kind == "summary":
-                self._final = (message[1], message[2], message[3], message[4])
+                self._final = (message[1], message[2], message[3], message[4], message[5])
                 self._ready.set()
                 return
 
@@ -275,11 +278,12 @@ class OnlineLearner:
     def _counts(self) -> Final:
         if self.session is not None:
             s = self.session
-            return dict(s.counts), dict(s.reject_reasons), s.last_loss, s.held_evidence()
-        return self._final if self._final is not None else ({}, {}, None, None)
+            counts, reasons = dict(s.counts), dict(s.reject_reasons)
+            return counts, reasons, s.last_loss, s.held_evidence(), s.known_grounds()
+        return self._final if self._final is not None else ({}, {}, None, None, None)
 
     def summary(self) -> dict[str, Any]:
-        c, reasons, last_loss, held_evidence = self._counts()
+        c, reasons, last_loss, held_evidence, _ = self._counts()
         return {
             "online_method": self.settings.method,
             "online_mode": "deterministic" if self.deterministic else "asynchronous",
@@ -324,11 +328,10 @@ class OnlineLearner:
         from learner.online.memory import memory_path_for, offline_path_for
 
         net = self.snapshot.net
-        header = adapted_header(
-            self.base.header, self.settings, self.snapshot.version, self._counts()[0]
-        )
-        if "basis" in net.header:  # composite: the grounds it knows now
-            header["basis"] = net.header["basis"]
+        counts, _, _, _, memory = self._counts()
+        header = adapted_header(self.base.header, self.settings, self.snapshot.version, counts)
+        if memory is not None or "basis" in net.header:  # composite: the grounds it knows now
+            header["basis"] = memory if memory is not None else net.header["basis"]
         out = save_model(path, GroundEffectNet(net.weights, net.biases, net.normaliser, header))
         save_model(offline_path_for(out), self.offline)
         source = self.memory.header.get("path") if self.memory else None

@@ -28,8 +28,11 @@ the lateral targets are measurement noise). In standardised units throughout.
   sample) passes the test within a fraction of a second. A change that passes is published
   once the estimate has converged (`settle`: its last batch improved its fit to the window
   by at most that much), not while it is still moving towards the data: an estimate
-  published on the way would be published again within the second. A change smaller than
-  `min_change` (RMS of the prediction over the window) is not worth publishing.
+  published on the way would be published again within the second. A change that lowers
+  the RMS error over the window by less than `min_change` is not worth a new model to the
+  controller: the memory of a learnt ground in use takes it (for the next flight's recall),
+  the controller does not (a refinement published every second or two, as the hold's
+  operating point drifts, is a change the controller has to fly through each time).
 - Memory: the grounds known (the offline training grounds, protected, and every ground
   learnt in flight) are kept with their coefficients. A ground is identified by how it
   pushes where the vehicle is now: when a stored ground explains the last `recall_window`
@@ -40,10 +43,10 @@ the lateral targets are measurement noise). In standardised units throughout.
   change's threshold, it is recalled whole (estimate, publication and a fresh prior around
   it). A learnt ground was fitted where the vehicle held, near the surface: judged on the
   whole window, the descent before would count against it for seconds. A learnt ground's
-  coefficients follow the estimate while it is the ground in use; a protected one is never
-  changed (learning on it starts a new entry). A ground this flight created and then leaves
-  for a stored one is dropped (merged): it was the stored ground, learnt again before the
-  memory told them apart.
+  coefficients follow the converged estimate while it is the ground in use, published or
+  not; a protected one is never changed (learning on it starts a new entry). A ground this
+  flight created and then leaves for a stored one is dropped (merged): it was the stored
+  ground, learnt again before the memory told them apart.
 """
 
 from __future__ import annotations
@@ -76,7 +79,7 @@ class CompositeConfig:
     # fit to the window by at most this many noise variances (a moving estimate would be
     # published again within the second)
     settle: float
-    min_change: float  # the smallest RMS change of the prediction over the window published
+    min_change: float  # the smallest drop of the RMS error over the window published
     far_var: float  # the prior's variance of the prediction far from the surface
     size_sd: float  # the prior sd of a relative change of the effect's size
     layer_bound: float  # spectral norm of the last layer, kept
@@ -261,7 +264,7 @@ def best_stored(
     fresh_ssr = ssr(rp, ry, fresh)
     best, best_gain = -1, -np.inf
     for k, g in enumerate(state.grounds):
-        if k == state.current and np.array_equal(g.coefficients, state.published):
+        if k == state.current:  # its memory may be ahead of what is published: not a recall
             continue
         residual = ry - rp @ g.coefficients
         g_ssr = float(residual @ residual)
@@ -309,8 +312,15 @@ def composite_update(
     # sure of a change: publish it once the estimate has stopped moving, and only if it is
     # large enough to matter to the controller
     moving = (ssr(wp, wy, previous) - fresh) / sigma2
-    size = float(np.sqrt(np.mean((wp @ (a - state.published)) ** 2)))
-    if moving > config.settle or size < config.min_change:
+    better = float(np.sqrt(published / n) - np.sqrt(fresh / n))  # the RMS error it removes
+    if moving > config.settle:
+        return state, Decision("held", gain, name)
+    if better < config.min_change:
+        # too small a change for the controller; the memory of a learnt ground keeps it
+        if not state.grounds[state.current].protected:
+            grounds = list(state.grounds)
+            grounds[state.current] = replace(grounds[state.current], coefficients=a.copy())
+            state = replace(state, grounds=tuple(grounds))
         return state, Decision("held", gain, name)
     grounds = list(state.grounds)
     current, learnt, created = state.current, state.learnt, state.created

@@ -309,6 +309,13 @@ class OnlineSession:
         self.snapshot = Snapshot(self.snapshot.version + 1, self.offline, t_s)
         return self.snapshot
 
+    def known_grounds(self) -> dict[str, Any] | None:
+        """`composite`: the grounds as known now (a learnt ground's memory follows the estimate
+        between publications), for the model file saved after the flight."""
+        if self._composite is None:
+            return None
+        return grounds_to_header(self.base.header, self._composite)["basis"]
+
     def adapted_header(self) -> dict[str, Any]:
         """The model file's header for the current snapshot: where it came from, how."""
         header = adapted_header(self.base.header, self.settings, self.snapshot.version, self.counts)

@@ -160,7 +160,7 @@ class OnlineSettings:
         unit="N",
         lo=0.0,
         hi=1.0,
-        doc="composite: a change moves the prediction over the window by at least this RMS",
+        doc="composite: a change published lowers the RMS error over the window by at least this",
     )
     composite_settle: float = tunable(
         "GFX_OL_SETTLE",
