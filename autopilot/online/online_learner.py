@@ -48,8 +48,8 @@ CHUNK_SAMPLES = 16  # one message per 0.16 s of samples: the pipe, not the loop,
 READY_TIMEOUT_S = 60.0  # the learner process imports torch: about 2 s, far more under load
 # (sim time, loss, version, what became of the update in words, the ground in use or None)
 Report = Callable[[float, float | None, int, str, str | None], None]
-# the learner's last word: counts, reject reasons, last loss, why updates were held
-# counts, reject reasons, the last loss, the held evidence, composite's memory at the end
+# the learner's last word: counts, reject reasons, last loss, why updates were held, and
+# composite's memory of grounds at the end (what --save-model stores)
 Final = tuple[
     dict[str, int], dict[str, int], float | None, dict[str, float] | None, dict[str, Any] | None
 ]
