@@ -226,6 +226,32 @@ def test_a_refinement_too_small_to_publish_goes_to_the_memory_not_the_controller
     assert np.array_equal(states[-1].published, states[0].published)
 
 
+def test_a_stored_ground_the_data_leave_is_kept_and_the_change_starts_a_new_one():
+    """A stored ground recalled in this flight is refined by a change near it, but kept as
+    it was learnt when the estimate moves nearer another known ground (it was recalled on
+    too little evidence, over a ground neither knows): the change starts a new entry. An
+    offline ground always starts one; a ground this flight created is the one learnt."""
+    from dataclasses import replace
+
+    from learner.online.composite import another_ground
+    from learner.online.composite_session import basis_values, composite_config, start_state
+
+    def row(name: str) -> np.ndarray:
+        head = BASIS.header["basis"]["grounds"][name]
+        return np.concatenate([np.asarray(head["weights"])[Z], [np.asarray(head["biases"])[Z]]])
+
+    norm = BASIS.normaliser
+    config = composite_config(COMPOSITE, float(np.max(norm.y_std)), BASIS.header["layer_bound"])
+    state = start_state(with_learnt(row("rho2")), config)  # home rho1 and learnt-1, rho 2's
+    recalled = replace(state, current=len(state.grounds) - 1, settled=True)
+    phi = basis_values(tuple(BASIS.weights), tuple(BASIS.biases), (NEAR - norm.x_mean) / norm.x_std)
+    assert another_ground(recalled, row("rho0.5"), phi)  # nearer home than rho 2
+    assert not another_ground(recalled, row("rho2") * 1.02, phi)  # a refinement
+    assert another_ground(state, row("rho1") * 1.02, phi)  # home: offline, never written
+    created = replace(recalled, created="learnt-1")
+    assert not another_ground(created, row("rho0.5"), phi)
+
+
 def with_learnt(coefficients: np.ndarray) -> GroundEffectNet:
     """The basis carrying one learnt ground (as a model saved after a flight would)."""
     header = {**BASIS.header, "basis": {**BASIS.header["basis"]}}

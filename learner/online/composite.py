@@ -44,9 +44,12 @@ the lateral targets are measurement noise). In standardised units throughout.
   it). A learnt ground was fitted where the vehicle held, near the surface: judged on the
   whole window, the descent before would count against it for seconds. A learnt ground's
   coefficients follow the converged estimate while it is the ground in use, published or
-  not; a protected one is never changed (learning on it starts a new entry). A ground this
-  flight created and then leaves for a stored one is dropped (merged): it was the stored
-  ground, learnt again before the memory told them apart.
+  not; a protected one is never changed (learning on it starts a new entry), nor is a
+  stored ground this flight recalled once the estimate has moved nearer another known
+  ground (`another_ground`: it was recalled on too little evidence; learning starts a new
+  entry and the stored ground stays as it was learnt). A ground this flight created and
+  then leaves for a stored one is dropped (merged): it was the stored ground, learnt again
+  before the memory told them apart.
 """
 
 from __future__ import annotations
@@ -275,6 +278,27 @@ def best_stored(
     return best, best_gain
 
 
+def another_ground(state: CompositeState, a: np.ndarray, wp: np.ndarray) -> bool:
+    """Whether the estimate `a` belongs in a new entry rather than the ground in use: the
+    ground in use is an offline one (never overwritten), or a stored ground recalled in
+    this flight from which the estimate has moved nearer another known ground (its
+    prediction over the window nearer). A stored ground recalled on too little evidence
+    (one pushing more like it than like home, over a ground neither knows) is then kept as
+    it was learnt, not written over with the ground under the vehicle now; a ground this
+    flight created is the one being learnt."""
+    current = state.grounds[state.current]
+    if current.protected:
+        return True
+    if current.name == state.created:
+        return False
+
+    def distance(g: Ground) -> float:
+        return float(np.mean((wp @ (a - g.coefficients)) ** 2))
+
+    own = distance(current)
+    return any(distance(g) < own for g in state.grounds if g is not current)
+
+
 def composite_update(
     state: CompositeState,
     phi: np.ndarray,
@@ -315,16 +339,17 @@ def composite_update(
     better = float(np.sqrt(published / n) - np.sqrt(fresh / n))  # the RMS error it removes
     if moving > config.settle:
         return state, Decision("held", gain, name)
+    new_ground = another_ground(state, a, wp)
     if better < config.min_change:
         # too small a change for the controller; the memory of a learnt ground keeps it
-        if not state.grounds[state.current].protected:
+        if not new_ground:
             grounds = list(state.grounds)
             grounds[state.current] = replace(grounds[state.current], coefficients=a.copy())
             state = replace(state, grounds=tuple(grounds))
         return state, Decision("held", gain, name)
     grounds = list(state.grounds)
     current, learnt, created = state.current, state.learnt, state.created
-    if grounds[current].protected:  # learning on an offline ground: a new ground
+    if new_ground:  # an offline ground, or one the data left: learning starts a new entry
         learnt += 1
         grounds.append(Ground(f"learnt-{learnt}", a.copy(), False))
         kept = [g for g in grounds if not g.protected]
