@@ -45,11 +45,11 @@ the lateral targets are measurement noise). In standardised units throughout.
   whole window, the descent before would count against it for seconds. A learnt ground's
   coefficients follow the converged estimate while it is the ground in use, published or
   not; a protected one is never changed (learning on it starts a new entry), nor is a
-  stored ground this flight recalled once the estimate has moved nearer another known
-  ground (`another_ground`: it was recalled on too little evidence; learning starts a new
-  entry and the stored ground stays as it was learnt). A ground this flight created and
-  then leaves for a stored one is dropped (merged): it was the stored ground, learnt again
-  before the memory told them apart.
+  stored ground this flight recalled once the estimate has moved from it by more than half
+  the distance to its nearest known ground (`another_ground`: it was recalled on too little
+  evidence; learning starts a new entry and the stored ground stays as it was learnt). A
+  ground this flight created and then leaves for a stored one is dropped (merged): it was
+  the stored ground, learnt again before the memory told them apart.
 """
 
 from __future__ import annotations
@@ -280,23 +280,24 @@ def best_stored(
 
 def another_ground(state: CompositeState, a: np.ndarray, wp: np.ndarray) -> bool:
     """Whether the estimate `a` belongs in a new entry rather than the ground in use: the
-    ground in use is an offline one (never overwritten), or a stored ground recalled in
-    this flight from which the estimate has moved nearer another known ground (its
-    prediction over the window nearer). A stored ground recalled on too little evidence
-    (one pushing more like it than like home, over a ground neither knows) is then kept as
-    it was learnt, not written over with the ground under the vehicle now; a ground this
-    flight created is the one being learnt."""
+    ground in use is an offline one (never overwritten), or a stored ground this flight
+    recalled from which the estimate has moved by more than half the distance to the known
+    ground nearest it (the RMS difference of their predictions over the window): past that
+    the data no longer say it is that ground. A stored ground recalled on too little
+    evidence (one pushing more like it than like home, over a ground neither knows) is then
+    kept as it was learnt, not written over with the ground under the vehicle now; a ground
+    this flight created is the one being learnt."""
     current = state.grounds[state.current]
     if current.protected:
         return True
     if current.name == state.created:
         return False
 
-    def distance(g: Ground) -> float:
-        return float(np.mean((wp @ (a - g.coefficients)) ** 2))
+    def distance(b: np.ndarray) -> float:
+        return float(np.sqrt(np.mean((wp @ (b - current.coefficients)) ** 2)))
 
-    own = distance(current)
-    return any(distance(g) < own for g in state.grounds if g is not current)
+    nearest = min(distance(g.coefficients) for g in state.grounds if g is not current)
+    return distance(a) > 0.5 * nearest
 
 
 def composite_update(
