@@ -330,8 +330,9 @@ class OnlineLearner:
         net = self.snapshot.net
         counts, _, _, _, memory = self._counts()
         header = adapted_header(self.base.header, self.settings, self.snapshot.version, counts)
-        if memory is not None or "basis" in net.header:  # composite: the grounds it knows now
-            header["basis"] = memory if memory is not None else net.header["basis"]
+        basis = memory if memory is not None else net.header.get("basis")
+        if basis:  # composite: the grounds it knows now
+            header["basis"] = basis
         out = save_model(path, GroundEffectNet(net.weights, net.biases, net.normaliser, header))
         save_model(offline_path_for(out), self.offline)
         source = self.memory.header.get("path") if self.memory else None

@@ -337,9 +337,9 @@ def composite_update(
     # sure of a change: publish it once the estimate has stopped moving, and only if it is
     # large enough to matter to the controller
     moving = (ssr(wp, wy, previous) - fresh) / sigma2
-    better = float(np.sqrt(published / n) - np.sqrt(fresh / n))  # the RMS error it removes
     if moving > config.settle:
         return state, Decision("held", gain, name)
+    better = float(np.sqrt(published / n) - np.sqrt(fresh / n))  # the RMS error it removes
     new_ground = another_ground(state, a, wp)
     if better < config.min_change:
         # too small a change for the controller; the memory of a learnt ground keeps it
