@@ -248,11 +248,11 @@ def _control(p: Parts, s: LoopState, t: float, estimate: Estimate, cmd: Command)
         s.speeds_rad_s, s.ge_n, s.output = (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), None
         s.integral_m_s2 = (0.0, 0.0, 0.0)  # rotors off: the next flight starts afresh
         return None
-    tuning, vehicle, state = p.tuning, p.config.vehicle, estimate.state
+    tuning, vehicle, state, speeds = p.tuning, p.config.vehicle, estimate.state, s.speeds_rad_s
     t0 = time.perf_counter()
     replaced = p.online.apply(tuning.model)
-    speeds = s.speeds_rad_s
-    inputs = GroundEffectInputs(estimate.height_m, state.velocity_m_s, state.quaternion, speeds)
+    v = tuning.model_velocity(state.velocity_m_s, cmd.setpoint.velocity_m_s)
+    inputs = GroundEffectInputs(estimate.height_m, v, state.quaternion, speeds)
     target = tuning.model.predict(inputs)
     if replaced is not None and tuning.controller.position_i > 0.0:
         old = NeuralGroundEffect(replaced).predict(inputs)
