@@ -35,6 +35,7 @@ def add_parser(sub: Any) -> None:
         "--method", default="naive", choices=METHODS, help="online method (default: naive)"
     )
     b.add_argument("--repeat", type=int, default=5, help="off/on pairs (default: 5)")
+    b.add_argument("--hold-s", type=float, help="the 3 cm hold of each flight, s (default: 40)")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench)
     b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")
@@ -143,7 +144,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
         if args.repeat < 1:
             raise ConfigError(f"--repeat: {args.repeat} must be at least 1")
-        result = bench_online(args.method, args.repeat)
+        hold = {} if args.hold_s is None else {"hold_s": args.hold_s}
+        if args.hold_s is not None and not 0.0 < args.hold_s <= 3600.0:
+            raise ConfigError(f"--hold-s: {args.hold_s:g} is outside the allowed range (0, 3600]")
+        result = bench_online(args.method, args.repeat, **hold)
         print(
             json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
         )
