@@ -45,9 +45,6 @@ class FenceParams:
 class ModelParams:
     model: int = param(1, lo=0, hi=2, doc="ground-effect model: 0 none, 1 analytic, 2 neural")
     rho: float = param(1.0, lo=0.01, hi=50.0, doc="rho of the analytic model (equation 3.4)")
-    velocity: int = param(
-        1, lo=0, hi=1, doc="velocity the model is given: 0 the setpoint's, 1 the estimate's"
-    )
 
 
 @dataclass(frozen=True)
@@ -109,7 +106,6 @@ NAMES: dict[str, tuple[str, str]] = {
     "GF_MAX_HOR_DIST": ("fence", "max_radius_m"),
     "GFX_GE_MODEL": ("model", "model"),
     "GFX_GE_RHO": ("model", "rho"),
-    "GFX_GE_VEL": ("model", "velocity"),
     "GFX_OL_METHOD": ("online", "method"),
     **{name: ("online_settings", field) for name, field in tuned_in_flight().items()},
     "GFX_OL_PAUSE": ("online", "pause"),

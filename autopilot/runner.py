@@ -251,7 +251,7 @@ def _control(p: Parts, s: LoopState, t: float, estimate: Estimate, cmd: Command)
     tuning, vehicle, state, speeds = p.tuning, p.config.vehicle, estimate.state, s.speeds_rad_s
     t0 = time.perf_counter()
     replaced = p.online.apply(tuning.model)
-    v = tuning.model_velocity(state.velocity_m_s, cmd.setpoint.velocity_m_s)
+    v = p.online.model_velocity(s.cmd.phase, state.velocity_m_s, cmd.setpoint.velocity_m_s)
     inputs = GroundEffectInputs(estimate.height_m, v, state.quaternion, speeds)
     target = tuning.model.predict(inputs)
     if replaced is not None and tuning.controller.position_i > 0.0:

@@ -6,7 +6,6 @@ from pathlib import Path
 
 from autopilot.control.ground_models import GroundEffectModel, make_model
 from autopilot.params import ParamStore
-from simbridge.frames import Vec3
 from simbridge.vehicle import Vehicle
 
 
@@ -36,23 +35,8 @@ class Tuning:
         # the speed limits' lead: steady speed = error * a0 / a1 (commander.limited_setpoint)
         self.lead_s = gains.position_d / gains.position_p if gains.position_p > 0 else 2.0
         self.vertical_lead_s = gains.vertical_d / gains.vertical_p if gains.vertical_p > 0 else 2.0
-        self.model_on_estimated_velocity = store.group("model").velocity == 1
         key = store.model()
         if key != self.model_key:
             self.model_key = key
             self.model = make_model(key[0], self.vehicle, key[1], self.network)
         return True
-
-    def model_velocity(self, estimated_m_s: Vec3, planned_m_s: Vec3) -> Vec3:
-        """The velocity the ground-effect model is given: the estimate's (the thesis's state,
-        GFX_GE_VEL = 1) or the setpoint's (0).
-
-        The true effect depends on height and thrust (equation 3.4), but a network trained on
-        flights near the ground can still move with vertical velocity there, where its data
-        barely move (a few cm/s at a 3 cm hold). Fed the estimate, that slope acts on the
-        vertical loop as a derivative gain of its own, beside the controller's, in proportion
-        to the effect; fed the planned velocity, the model still tells a descent from a hold
-        and closes no loop through its velocity input. Which holds closer depends on the
-        network's slope, so the thesis's choice stays the default.
-        """
-        return estimated_m_s if self.model_on_estimated_velocity else planned_m_s

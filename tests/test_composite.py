@@ -426,3 +426,31 @@ def test_fly_says_how_many_updates_held_a_change_past_the_threshold():
     text = " ".join(_online_lines(summary))
     assert "121 held (likelihood ratio median 2.93, largest 29.33, against the threshold 30" in text
     assert "4 over it, held while the estimate converged or for a change too small" in text
+
+
+def test_while_holding_composite_is_served_at_the_setpoints_velocity():
+    """The basis's prediction moves with vertical velocity at a 3 cm hold, where its data
+    barely move: while holding, composite's model is given (and learns at) the setpoint's
+    velocity; elsewhere, and with GFX_OL_HOLD_V = 0, the estimate's."""
+    from autopilot.commander.commander import Phase
+    from autopilot.online.online_control import model_velocity
+    from simbridge.vehicle import GRAVITY_M_S2, load_vehicle
+
+    v = load_vehicle()
+    hover = float(np.sqrt(v.mass_kg * GRAVITY_M_S2 / (4.0 * v.thrust_coefficient_n_s2)))
+    hold = np.array([[0.03, 0.0, 0.0, vz, 1.0, 0.0, 0.0, 0.0, hover, hover, hover, hover]
+                     for vz in (-0.02, -0.01, 0.0, 0.01, 0.02)])  # fmt: skip
+    moved_n = np.ptp(BASIS.predict_batch(hold)[:, Z])
+    assert moved_n > 5e-3  # a hold's cm/s move the prediction by millinewtons
+
+    estimated, planned = (0.0, 0.0, 0.02), (0.0, 0.0, 0.0)
+    assert model_velocity(True, Phase.HOLDING, estimated, planned) == planned
+    assert model_velocity(True, Phase.TAKING_OFF, estimated, planned) == estimated
+    assert model_velocity(True, Phase.LANDING, estimated, planned) == estimated
+    assert model_velocity(False, Phase.HOLDING, estimated, planned) == estimated
+    from autopilot.params import ParamStore
+
+    store = ParamStore(None, {"GFX_OL_METHOD": 7})
+    assert store.online_settings().composite_hold_velocity == 1  # the default
+    store.set("GFX_OL_HOLD_V", 0.0)
+    assert store.online_settings().composite_hold_velocity == 0

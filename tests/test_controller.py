@@ -148,32 +148,6 @@ def test_the_ground_effect_fixed_point_converges_where_straight_feedback_diverge
     assert abs(straight) > 100  # the thesis's plain feedback oscillates ever wider
 
 
-def test_gfx_ge_vel_gives_the_network_the_planned_velocity_instead_of_the_estimate():
-    """The shipped basis's prediction moves with vertical velocity at the 3 cm hold, where its
-    data barely move; GFX_GE_VEL = 0 gives it the setpoint's velocity, so that this slope closes
-    no loop; the default (1) gives it the estimate, as the thesis did."""
-    from autopilot.params import ParamStore
-    from autopilot.tuning import Tuning
-
-    net = make_model("neural", V, network="grounds")
-    hover_rad_s = math.sqrt(V.mass_kg * GRAVITY_M_S2 / (4.0 * V.thrust_coefficient_n_s2))
-
-    def at_hold(velocity_m_s):
-        inputs = GroundEffectInputs(0.03, velocity_m_s, (1.0, 0.0, 0.0, 0.0), (hover_rad_s,) * 4)
-        return net.predict(inputs)[2]
-
-    velocities = [(0.0, 0.0, vz) for vz in (-0.02, -0.01, 0.01, 0.02)]  # a hold's cm/s
-    moved_n = max(abs(at_hold(v) - at_hold((0.0, 0.0, 0.0))) for v in velocities)
-    assert moved_n > 1e-3  # a millinewton and more: what the loop would feel
-
-    planned = (0.0, 0.0, 0.0)  # holding
-    thesis = Tuning(ParamStore(None), V, None)  # the default
-    assert [thesis.model_velocity(v, planned) for v in velocities] == velocities
-    setpoint = Tuning(ParamStore(None, {"GFX_GE_VEL": 0}), V, None)
-    fed = [setpoint.model_velocity(v, planned) for v in velocities]
-    assert {at_hold(v) for v in fed} == {at_hold(planned)}
-
-
 def test_the_integral_sums_the_pd_term_and_stops_when_frozen_or_at_its_limit():
     gains = ControllerParams()
     pd = (0.0, 0.0, 0.5)  # a steady shortfall: the vehicle sags below its setpoint

@@ -276,9 +276,9 @@ def test_online_parameters_have_ranges_and_the_options_clear_errors(tmp_path):
 def test_a_ground_station_tunes_the_settings_the_learner_uses_within_their_declared_ranges():
     names = sorted(n for n in ORDER if n.startswith("GFX_OL_"))
     assert names == [
-        "GFX_OL_CONF", "GFX_OL_FORGET", "GFX_OL_LAMBDA", "GFX_OL_LR", "GFX_OL_MARGIN",
-        "GFX_OL_METHOD", "GFX_OL_MIN_CHG", "GFX_OL_PAUSE", "GFX_OL_RESET", "GFX_OL_RLS_P0",
-        "GFX_OL_RLS_SC", "GFX_OL_SETTLE", "GFX_OL_TRACK",
+        "GFX_OL_CONF", "GFX_OL_FORGET", "GFX_OL_HOLD_V", "GFX_OL_LAMBDA", "GFX_OL_LR",
+        "GFX_OL_MARGIN", "GFX_OL_METHOD", "GFX_OL_MIN_CHG", "GFX_OL_PAUSE", "GFX_OL_RESET",
+        "GFX_OL_RLS_P0", "GFX_OL_RLS_SC", "GFX_OL_SETTLE", "GFX_OL_TRACK",
     ]  # fmt: skip
     assert ParamStore(None).online_settings() is None  # GFX_OL_METHOD 0: off
     numbered = range(int(SPECS["GFX_OL_METHOD"].hi) + 1)

@@ -16,12 +16,14 @@ from typing import Any
 
 import numpy as np
 
+from autopilot.commander.commander import Phase
 from autopilot.control.ground_models import GroundEffectModel, default_network
 from autopilot.params import ParamStore
 from learner.dataset import COLUMNS, FEATURES, TARGETS
 from learner.online.memory import Memory, load_memory, memory_path_for, offline_path_for
 from learner.online.names import NEEDS_BASIS, NEEDS_MEMORY
 from simbridge.config import ConfigError
+from simbridge.frames import Vec3
 
 # torch, and the learner with it, load only when learning is on: a flight without learning
 # connects to the simulator without waiting for them
@@ -32,6 +34,7 @@ Report = Callable[[float, float | None, int, str, str | None], None]
 _NAMES = list(COLUMNS)
 FEATURE_COLUMNS = np.array([_NAMES.index(f) for f in FEATURES])
 TARGET_COLUMNS = np.array([_NAMES.index(t) for t in TARGETS])
+VELOCITY_COLUMNS = np.array([_NAMES.index(v) for v in ("vx", "vy", "vz")])
 
 
 @dataclass(frozen=True)
@@ -81,6 +84,24 @@ def vertical_tracking_error(state: Any, setpoint: Any) -> float:
     return (state.velocity_m_s[2] - setpoint.velocity_m_s[2]) + LAMBDA_PER_S * dz
 
 
+def model_velocity(
+    hold_velocity: bool, phase: Phase, estimated_m_s: Vec3, planned_m_s: Vec3
+) -> Vec3:
+    """The velocity the model is given (and, with `composite`, learns at): the setpoint's while
+    holding when `hold_velocity`, else the estimate's (the thesis's state).
+
+    The true effect depends on height and thrust (equation 3.4), but a basis trained on
+    flights near the ground can still move with vertical velocity there, where its data barely
+    move (a few cm/s in a 3 cm hold). `composite` adapts only the last layer, so that slope
+    stays; fed the estimate, it acts on the vertical loop as a derivative gain beside the
+    controller's, in proportion to the effect, and the learner judges the model at velocities
+    the hold's noise and settling make. Given the setpoint's velocity while holding, the model
+    is served and learnt as the controller uses it; elsewhere (take-off, descents) the
+    velocity tells the network the flight's phase, and the estimate stays.
+    """
+    return planned_m_s if hold_velocity and phase == Phase.HOLDING else estimated_m_s
+
+
 class OnlineControl:
     def __init__(
         self, options: OnlineOptions, params: ParamStore, network: str | Path | None
@@ -91,6 +112,7 @@ class OnlineControl:
         self.learner: Any = None  # autopilot.online.online_learner.OnlineLearner, once learning
         self.active = False
         self.errors: list[str] = []
+        self.velocity_m_s: Vec3 | None = None  # the setpoint's, when the model was last given it
         settings = params.online_settings()
         needs_memory = settings is not None and settings.method in NEEDS_MEMORY
         # refuse at the start, not in flight: the memory must exist
@@ -154,10 +176,22 @@ class OnlineControl:
         if self.learner is not None and not self.learner.wait_ready():
             self.errors.append("the learner process was not up within a minute of the start")
 
+    def model_velocity(self, phase: Phase, estimated_m_s: Vec3, planned_m_s: Vec3) -> Vec3:
+        """The velocity the model is given this step (`model_velocity`); samples carry it."""
+        settings = self.params.online_settings() if self.active else None
+        hold = settings is not None and settings.method in NEEDS_BASIS
+        hold = hold and bool(settings.composite_hold_velocity)  # type: ignore[union-attr]
+        v = model_velocity(hold, phase, estimated_m_s, planned_m_s)
+        self.velocity_m_s = None if v is estimated_m_s else v
+        return v
+
     def submit(self, row: tuple[float, ...], tracking_m_s: float = 0.0) -> None:
-        """A learning sample, with the position loop's vertical composite error [m/s]."""
+        """A learning sample, with the position loop's vertical composite error [m/s]; at the
+        setpoint's velocity when the model was given it."""
         if self.active and self.learner is not None:
             r = np.asarray(row)
+            if self.velocity_m_s is not None:
+                r[VELOCITY_COLUMNS] = self.velocity_m_s
             self.learner.submit(r[FEATURE_COLUMNS], r[TARGET_COLUMNS], float(r[0]), tracking_m_s)
 
     def apply(self, model: GroundEffectModel) -> Any:

@@ -171,6 +171,15 @@ class OnlineSettings:
         "at most this likelihood ratio",
     )
 
+    composite_hold_velocity: int = tunable(
+        "GFX_OL_HOLD_V",
+        1,
+        lo=0,
+        hi=1,
+        doc="composite: while holding, the model is given and learns at the setpoint's "
+        "velocity (0: the estimate's)",
+    )
+
     def __post_init__(self) -> None:
         check_settings(self)
 
