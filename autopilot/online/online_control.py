@@ -112,6 +112,7 @@ class OnlineControl:
         self.learner: Any = None  # autopilot.online.online_learner.OnlineLearner, once learning
         self.active = False
         self.errors: list[str] = []
+        self.hold_velocity = False  # composite's GFX_OL_HOLD_V, while it learns
         self.velocity_m_s: Vec3 | None = None  # the setpoint's, when the model was last given it
         settings = params.online_settings()
         needs_memory = settings is not None and settings.method in NEEDS_MEMORY
@@ -142,8 +143,12 @@ class OnlineControl:
         """After a parameter change: start, reconfigure, pause or reset the learner."""
         settings = self.params.online_settings()
         self.active = settings is not None and model.name == "neural"
+        self.hold_velocity = False
         if settings is None or not self.active:
             return
+        self.hold_velocity = settings.method in NEEDS_BASIS and bool(
+            settings.composite_hold_velocity
+        )
         p = self.params.online()
         try:
             if self.learner is None:
@@ -163,7 +168,7 @@ class OnlineControl:
                 self.learner.configure(settings)
         except ConfigError as err:  # e.g. ewc asked for in flight without a memory
             self.errors.append(str(err))
-            self.active = False
+            self.active = self.hold_velocity = False
             return
         self.learner.pause(bool(p.pause))
         if p.reset:
@@ -178,10 +183,7 @@ class OnlineControl:
 
     def model_velocity(self, phase: Phase, estimated_m_s: Vec3, planned_m_s: Vec3) -> Vec3:
         """The velocity the model is given this step (`model_velocity`); samples carry it."""
-        settings = self.params.online_settings() if self.active else None
-        hold = settings is not None and settings.method in NEEDS_BASIS
-        hold = hold and bool(settings.composite_hold_velocity)  # type: ignore[union-attr]
-        v = model_velocity(hold, phase, estimated_m_s, planned_m_s)
+        v = model_velocity(self.hold_velocity, phase, estimated_m_s, planned_m_s)
         self.velocity_m_s = None if v is estimated_m_s else v
         return v
 

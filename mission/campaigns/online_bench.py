@@ -11,9 +11,9 @@ ratio (a machine whose speed drifts between pairs moves both flights of a pair a
 Targets: p99 controller step latency at most 20 % higher, real-time factor at least 80 %
 of learner-off. How far the learner-off flights' own p99 spread (largest over smallest)
 says what a ratio can tell on this machine. The hold lasts `hold_s` (40 s, where the
-mission holds 6): the learner works through the hold, and a p99 over its 10000 control
-steps moves less from one identical flight to the next than one over 1500. `composite`
-flies the basis model (`grounds`), off and on alike.
+mission holds 6): the learner works through most of the flight, and each p99 is taken over
+10000 control steps rather than 1500. `composite` flies the basis model (`grounds`), off and
+on alike.
 """
 
 from __future__ import annotations
