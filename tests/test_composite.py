@@ -433,7 +433,8 @@ def test_while_holding_composite_is_served_at_the_setpoints_velocity():
     barely move: while holding, composite's model is given (and learns at) the setpoint's
     velocity; elsewhere, and with GFX_OL_HOLD_V = 0, the estimate's."""
     from autopilot.commander.commander import Phase
-    from autopilot.online.online_control import model_velocity
+    from autopilot.online.online_control import at_setpoint_velocity
+    from autopilot.params import ParamStore
     from simbridge.vehicle import GRAVITY_M_S2, load_vehicle
 
     v = load_vehicle()
@@ -443,12 +444,10 @@ def test_while_holding_composite_is_served_at_the_setpoints_velocity():
     moved_n = np.ptp(BASIS.predict_batch(hold)[:, Z])
     assert moved_n > 5e-3  # a hold's cm/s move the prediction by millinewtons
 
-    estimated, planned = (0.0, 0.0, 0.02), (0.0, 0.0, 0.0)
-    assert model_velocity(True, Phase.HOLDING, estimated, planned) == planned
-    assert model_velocity(True, Phase.TAKING_OFF, estimated, planned) == estimated
-    assert model_velocity(True, Phase.LANDING, estimated, planned) == estimated
-    assert model_velocity(False, Phase.HOLDING, estimated, planned) == estimated
-    from autopilot.params import ParamStore
+    assert at_setpoint_velocity(True, Phase.HOLDING)
+    assert not at_setpoint_velocity(True, Phase.TAKING_OFF)
+    assert not at_setpoint_velocity(True, Phase.LANDING)
+    assert not at_setpoint_velocity(False, Phase.HOLDING)
 
     store = ParamStore(None, {"GFX_OL_METHOD": 7})
     assert store.online_settings().composite_hold_velocity == 1  # the default

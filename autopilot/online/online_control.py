@@ -84,11 +84,10 @@ def vertical_tracking_error(state: Any, setpoint: Any) -> float:
     return (state.velocity_m_s[2] - setpoint.velocity_m_s[2]) + LAMBDA_PER_S * dz
 
 
-def model_velocity(
-    hold_velocity: bool, phase: Phase, estimated_m_s: Vec3, planned_m_s: Vec3
-) -> Vec3:
-    """The velocity the model is given (and, with `composite`, learns at): the setpoint's while
-    holding when `hold_velocity`, else the estimate's (the thesis's state).
+def at_setpoint_velocity(hold_velocity: bool, phase: Phase) -> bool:
+    """Whether the model is given (and, with `composite`, learns at) the setpoint's velocity
+    this step rather than the estimate's (the thesis's state): while holding, when
+    `hold_velocity`.
 
     The true effect depends on height and thrust (equation 3.4), but a basis trained on
     flights near the ground can still move with vertical velocity there, where its data barely
@@ -99,7 +98,7 @@ def model_velocity(
     is served and learnt as the controller uses it; elsewhere (take-off, descents) the
     velocity tells the network the flight's phase, and the estimate stays.
     """
-    return planned_m_s if hold_velocity and phase == Phase.HOLDING else estimated_m_s
+    return hold_velocity and phase == Phase.HOLDING
 
 
 class OnlineControl:
@@ -182,10 +181,11 @@ class OnlineControl:
             self.errors.append("the learner process was not up within a minute of the start")
 
     def model_velocity(self, phase: Phase, estimated_m_s: Vec3, planned_m_s: Vec3) -> Vec3:
-        """The velocity the model is given this step (`model_velocity`); samples carry it."""
-        v = model_velocity(self.hold_velocity, phase, estimated_m_s, planned_m_s)
-        self.velocity_m_s = None if v is estimated_m_s else v
-        return v
+        """The velocity the model is given this step (`at_setpoint_velocity`); samples carry
+        it."""
+        at_setpoint = at_setpoint_velocity(self.hold_velocity, phase)
+        self.velocity_m_s = planned_m_s if at_setpoint else None
+        return planned_m_s if at_setpoint else estimated_m_s
 
     def submit(self, row: tuple[float, ...], tracking_m_s: float = 0.0) -> None:
         """A learning sample, with the position loop's vertical composite error [m/s]; at the

@@ -144,9 +144,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
         if args.repeat < 1:
             raise ConfigError(f"--repeat: {args.repeat} must be at least 1")
-        hold = {} if args.hold_s is None else {"hold_s": args.hold_s}
-        if args.hold_s is not None and not 0.0 < args.hold_s <= 3600.0:
-            raise ConfigError(f"--hold-s: {args.hold_s:g} is outside the allowed range (0, 3600]")
+        hold: dict[str, float] = {}
+        if args.hold_s is not None:
+            if not 0.0 < args.hold_s <= 3600.0:
+                raise ConfigError(
+                    f"--hold-s: {args.hold_s:g} is outside the allowed range (0, 3600]"
+                )
+            hold["hold_s"] = args.hold_s
         result = bench_online(args.method, args.repeat, **hold)
         print(
             json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
