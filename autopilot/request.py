@@ -42,6 +42,17 @@ def flight_seconds(text: str) -> float:
     return value
 
 
+def alternation_seconds(text: str) -> float:
+    """A learner's turn in seconds, in [0.1, 600]."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.1 <= value <= 600.0:
+        raise argparse.ArgumentTypeError(f"expected seconds in [0.1, 600], got {text!r}")
+    return value
+
+
 def option(
     default: Any,
     help: str,
@@ -155,6 +166,14 @@ class FlightRequest:
     )
     save_model: Path | None = option(
         None, "save the adapted network here at the end", type=Path, section="online learning"
+    )
+    online_alternate: float | None = option(
+        None,
+        "the learner works S simulated seconds, then rests S (no samples taken), in turn; the "
+        "summary keeps each control step's time with its turn (groundfx bench online)",
+        type=alternation_seconds,
+        metavar="S",
+        section="online learning",
     )
     record: Path | None = option(
         None,

@@ -166,7 +166,7 @@ def _open(config: AutopilotConfig, trace: FlightTrace) -> Parts:
     except LinkLost as lost:
         recorder.close(str(lost))
         gcs.close()
-        online.close()
+        online.close([])
         raise
     recorder.watch_counters("sim", link.counters)
     recorder.watch_counters("gcs", gcs.counters.recorded)
@@ -250,7 +250,7 @@ def _control(p: Parts, s: LoopState, t: float, estimate: Estimate, cmd: Command)
         return None
     tuning, vehicle, state, speeds = p.tuning, p.config.vehicle, estimate.state, s.speeds_rad_s
     t0 = time.perf_counter()
-    replaced = p.online.apply(tuning.model)
+    replaced = p.online.apply(tuning.model, t)
     v = p.online.model_velocity(s.cmd.phase, state.velocity_m_s, cmd.setpoint.velocity_m_s)
     inputs = GroundEffectInputs(estimate.height_m, v, state.quaternion, speeds)
     target = tuning.model.predict(inputs)
@@ -484,7 +484,7 @@ def fly_mission(config: AutopilotConfig) -> Flight:
         # the loop's time: stopping the learner and closing links and files is not flying
         wall = time.perf_counter() - wall0
         p.link.close()
-        online_summary = p.online.close()
+        online_summary = p.online.close(p.trace.timings)
         p.gcs.save_signing(time.monotonic())
         p.gcs.close()
         if sys.exc_info()[0] is not None:  # an exception on its way out ended the flight

@@ -18,6 +18,7 @@ import numpy as np
 
 from autopilot.commander.commander import Phase
 from autopilot.control.ground_models import GroundEffectModel, default_network
+from autopilot.online.alternation import Alternation
 from autopilot.params import ParamStore
 from learner.dataset import COLUMNS, FEATURES, TARGETS
 from learner.online.memory import Memory, load_memory, memory_path_for, offline_path_for
@@ -42,6 +43,7 @@ class OnlineOptions:
     deterministic: bool = True  # updates inside the control step: same sim times every run
     save_path: Path | None = None  # the adapted model at the end of the flight
     on_report: Report | None = None  # per update: the recorder
+    alternate_s: float | None = None  # the learner works and rests in turns this long
 
 
 def find_memory(network: str | Path | None, rho: float) -> Memory | None:
@@ -113,6 +115,10 @@ class OnlineControl:
         self.errors: list[str] = []
         self.hold_velocity = False  # composite's GFX_OL_HOLD_V, while it learns
         self.velocity_m_s: Vec3 | None = None  # the setpoint's, when the model was last given it
+        self.resting = False  # the learner's turn to rest (`alternate_s`): no samples taken
+        self.alternation = (
+            Alternation(options.alternate_s) if options.alternate_s is not None else None
+        )
         settings = params.online_settings()
         needs_memory = settings is not None and settings.method in NEEDS_MEMORY
         # refuse at the start, not in flight: the memory must exist
@@ -136,7 +142,7 @@ class OnlineControl:
 
     @property
     def sample_hz(self) -> float:
-        return SAMPLE_HZ if self.active else 0.0
+        return SAMPLE_HZ if self.active and not self.resting else 0.0
 
     def refresh(self, model: GroundEffectModel, t_s: float) -> None:
         """After a parameter change: start, reconfigure, pause or reset the learner."""
@@ -196,9 +202,12 @@ class OnlineControl:
                 r[VELOCITY_COLUMNS] = self.velocity_m_s
             self.learner.submit(r[FEATURE_COLUMNS], r[TARGET_COLUMNS], float(r[0]), tracking_m_s)
 
-    def apply(self, model: GroundEffectModel) -> Any:
+    def apply(self, model: GroundEffectModel, t_s: float) -> Any:
         """The current snapshot into the neural model: one reference read per step. Returns
-        the network it replaced when the snapshot changed (else None)."""
+        the network it replaced when the snapshot changed (else None). With `alternate_s`,
+        the learner's turn at `t_s` too."""
+        if self.alternation is not None:
+            self.resting = not self.alternation.step(t_s)
         if self.active and self.learner is not None:
             net = self.learner.snapshot.net
             old = model.net  # type: ignore[attr-defined]
@@ -207,12 +216,15 @@ class OnlineControl:
                 return old
         return None
 
-    def close(self) -> dict[str, Any]:
-        """Stop the learner, save the adapted model if asked; the summary's online part."""
+    def close(self, controller_s: list[float]) -> dict[str, Any]:
+        """Stop the learner, save the adapted model if asked; the summary's online part
+        (`controller_s`: the control steps' times, split by the learner's turns)."""
         if self.learner is None:
             return {"online_method": "off", "online_errors": self.errors} if self.errors else {}
         self.learner.close()
         out = self.learner.summary()
+        if self.alternation is not None:
+            out["online_alternation"] = self.alternation.summary(controller_s)
         out["online_errors"] = self.errors + out["online_errors"]
         if self.options.save_path is not None:
             out["saved_model"] = str(self.learner.save(self.options.save_path))

@@ -30,12 +30,22 @@ def add_parser(sub: Any) -> None:
     b.add_argument("--network", default="rho2", help="model file or packaged name")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench)
-    b = bench_sub.add_parser("online", help="controller latency and rtf, learner off and on")
-    b.add_argument(
-        "--method", default="naive", choices=METHODS, help="online method (default: naive)"
+    b = bench_sub.add_parser(
+        "online", help="controller latency and rtf, the learner working against resting"
     )
-    b.add_argument("--repeat", type=int, default=5, help="off/on pairs (default: 5)")
-    b.add_argument("--hold-s", type=float, help="the 3 cm hold of each flight, s (default: 40)")
+    b.add_argument(
+        "--method",
+        default="naive",
+        choices=(*METHODS, "all"),
+        help="online method, or all of them in turn (default: naive)",
+    )
+    b.add_argument("--repeat", type=int, default=5, help="flights per method (default: 5)")
+    b.add_argument("--hold-s", type=float, help="the 3 cm hold of each flight, s (default: 120)")
+    b.add_argument(
+        "--alternate-s",
+        type=float,
+        help="the learner's turns, working then resting, simulated s (default: 1)",
+    )
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench)
     b = bench_sub.add_parser("sitl", help="simulator and autopilot processes in lockstep")
@@ -140,22 +150,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         )
         return 0
     if args.target == "online":
-        from mission.campaigns.online_bench import bench_online
-
-        if args.repeat < 1:
-            raise ConfigError(f"--repeat: {args.repeat} must be at least 1")
-        hold: dict[str, float] = {}
-        if args.hold_s is not None:
-            if not 0.0 < args.hold_s <= 3600.0:
-                raise ConfigError(
-                    f"--hold-s: {args.hold_s:g} is outside the allowed range (0, 3600]"
-                )
-            hold["hold_s"] = args.hold_s
-        result = bench_online(args.method, args.repeat, **hold)
-        print(
-            json.dumps(result) if args.json else "\n".join(f"{k}: {v}" for k, v in result.items())
-        )
-        return 0
+        return _bench_online(args)
     if args.target == "sitl":
         from mission.campaigns.bench import bench_sitl
 
@@ -208,3 +203,58 @@ def cmd_bench(args: argparse.Namespace) -> int:
             f"{r['load_average'][0]:.2f} before, {r['load_average'][1]:.2f} after"
         )
     return 0
+
+
+def _bench_online(args: argparse.Namespace) -> int:
+    from mission.campaigns.online_bench import bench_online
+
+    if args.repeat < 1:
+        raise ConfigError(f"--repeat: {args.repeat} must be at least 1")
+    chosen: dict[str, float] = {}
+    if args.hold_s is not None:
+        if not 0.0 < args.hold_s <= 3600.0:
+            raise ConfigError(f"--hold-s: {args.hold_s:g} is outside the allowed range (0, 3600]")
+        chosen["hold_s"] = args.hold_s
+    if args.alternate_s is not None:
+        if not 0.1 <= args.alternate_s <= 600.0:
+            raise ConfigError(
+                f"--alternate-s: {args.alternate_s:g} is outside the allowed range [0.1, 600]"
+            )
+        chosen["alternate_s"] = args.alternate_s
+    methods = METHODS if args.method == "all" else (args.method,)
+    results = {}
+    for method in methods:
+        results[method] = r = bench_online(method, args.repeat, **chosen)
+        if not args.json:
+            print(_online_line(r), flush=True)
+    if args.json:
+        print(json.dumps(results if args.method == "all" else results[args.method]))
+    return 0 if all(_meets(r) for r in results.values()) else 3
+
+
+def _meets(r: dict[str, Any]) -> bool:
+    return bool(r["meets_p99_target"] and r["meets_rtf_target"] and r["no_sample_dropped"])
+
+
+def _online_line(r: dict[str, Any]) -> str:
+    """One method's figures in a few lines."""
+
+    def ci(key: str) -> str:
+        low_high = r.get(f"{key}_ci95")
+        return f" [{low_high[0]:.2f}, {low_high[1]:.2f}]" if low_high else ""
+
+    verdict = "meets" if _meets(r) else "misses"
+    return (
+        f"{r['method']} ({r['network']}, {r['flights']} flights, {r['steps_working']} steps "
+        f"working, {r['steps_resting']} resting):\n"
+        f"  controller p99 {r['controller_us_p99_working']:.0f} us working, "
+        f"{r['controller_us_p99_resting']:.0f} resting: {r['p99_ratio']:.2f}x{ci('p99_ratio')}"
+        f" (p50 {r['p50_ratio']:.2f}x; resting against resting "
+        f"{r['resting_halves_p99_ratio']:.2f}x)\n"
+        f"  real-time factor {r['rtf_working']:.2f} working, {r['rtf_resting']:.2f} resting: "
+        f"{r['rtf_ratio']:.2f}x{ci('rtf_ratio')}\n"
+        f"  updates {r['online_updates']}, samples dropped {r['online_dropped']}; {verdict} the "
+        f"targets (p99 at most 1.2x, real-time factor at least 0.8x, no sample dropped); load "
+        f"average "
+        f"{r['load_average'][0]:.2f} before, {r['load_average'][1]:.2f} after"
+    )

@@ -31,7 +31,11 @@ def online_options(args: argparse.Namespace, reproducible: bool) -> object:
     deterministic = args.online_deterministic
     if deterministic is None:
         deterministic = reproducible
-    return OnlineOptions(deterministic=deterministic, save_path=args.save_model)
+    return OnlineOptions(
+        deterministic=deterministic,
+        save_path=args.save_model,
+        alternate_s=getattr(args, "online_alternate", None),
+    )
 
 
 def add_online_learn_parsers(learn: argparse._SubParsersAction, func: object) -> None:
