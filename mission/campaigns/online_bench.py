@@ -121,7 +121,7 @@ def intervals(flights: list[dict[str, Any]], seed: int = 0) -> dict[str, list[fl
 
 def bench_online(
     method: str = "naive",
-    repeat: int = 5,
+    repeat: int = 8,
     world: str = "default",
     hold_s: float = DEFAULT_HOLD_S,
     alternate_s: float = DEFAULT_ALTERNATE_S,

@@ -39,7 +39,7 @@ def add_parser(sub: Any) -> None:
         choices=(*METHODS, "all"),
         help="online method, or all of them in turn (default: naive)",
     )
-    b.add_argument("--repeat", type=int, default=5, help="flights per method (default: 5)")
+    b.add_argument("--repeat", type=int, default=8, help="flights per method (default: 8)")
     b.add_argument("--hold-s", type=float, help="the 3 cm hold of each flight, s (default: 120)")
     b.add_argument(
         "--alternate-s",
