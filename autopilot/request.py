@@ -31,26 +31,25 @@ DEFAULT_PARAMS_FILE = Path("logs") / "params.yaml"
 NO_PARAMS_FILE = "none"  # --params-file none: nothing persists
 
 
-def flight_seconds(text: str) -> float:
-    """A flight's limit (its length, a silence) in seconds, in [1, 86400]."""
+def seconds_within(low: float, high: float, text: str) -> float:
+    """Seconds in [low, high], or an argparse error naming the range."""
     try:
         value = float(text)
     except ValueError:
         value = math.nan
-    if not 1.0 <= value <= 86400.0:
-        raise argparse.ArgumentTypeError(f"expected seconds in [1, 86400], got {text!r}")
+    if not low <= value <= high:
+        raise argparse.ArgumentTypeError(f"expected seconds in [{low:g}, {high:g}], got {text!r}")
     return value
+
+
+def flight_seconds(text: str) -> float:
+    """A flight's limit (its length, a silence) in seconds, in [1, 86400]."""
+    return seconds_within(1.0, 86400.0, text)
 
 
 def alternation_seconds(text: str) -> float:
     """A learner's turn in seconds, in [0.1, 600]."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not 0.1 <= value <= 600.0:
-        raise argparse.ArgumentTypeError(f"expected seconds in [0.1, 600], got {text!r}")
-    return value
+    return seconds_within(0.1, 600.0, text)
 
 
 def option(
