@@ -3,7 +3,7 @@
 The control loop calls `submit` (never blocks: a full queue drops the sample and counts it)
 and reads `snapshot` (one reference, replaced whole by the learner thread).
 
-Asynchronous (the default with a ground station): samples go, in chunks of CHUNK_SAMPLES,
+Asynchronous (the default with a ground station): samples go, in chunks (CHUNK_SAMPLES),
 down a pipe to the learner process (autopilot/online/learner_process.py), which runs the update
 on the other core; the queue is the pipe, bounded by the samples sent and not yet taken
 off it. The learner thread here waits on the pipe for new weights and publishes each as
@@ -20,6 +20,7 @@ import contextlib
 import multiprocessing
 import shutil
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
@@ -44,7 +45,13 @@ from learner.online.snapshot import Snapshot, make_snapshot
 QUEUE_SIZE = 512  # samples: 5 s of slack before dropping
 NEAR_SURFACE_M = 0.05  # within 2 rotor radii of the surface the grounds tell apart ...
 CLEAR_OF_SURFACE_M = 0.5  # ... reached coming down from this high (not the take-off)
-CHUNK_SAMPLES = 16  # one message per 0.16 s of samples: the pipe, not the loop, carries them
+CHUNK_SAMPLES = 16  # a message carries at least 0.16 s of samples ...
+CHUNK_WALL_S = 0.05  # ... and goes at least this long after the one before, with up to
+CHUNK_MAX = 128  # this many: in real time a message per 0.16 s, in a lockstep flight at
+# full speed about 20 a second of wall time, not 60. Each message wakes the learner process,
+# which updates at once; `composite`, updating every 16 samples, was woken 50 times a
+# second, and the loop's p99 step time in `groundfx bench online` rose 1.1-1.3-fold
+# against the learner resting (about 1.0 with these chunks).
 READY_TIMEOUT_S = 60.0  # the learner process imports torch: about 2 s, far more under load
 # (sim time, loss, version, what became of the update in words, the ground in use or None)
 Report = Callable[[float, float | None, int, str, str | None], None]
@@ -94,7 +101,8 @@ class OnlineLearner:
             return
         self._queue_size = queue_size
         self._chunk_samples = max(1, min(CHUNK_SAMPLES, queue_size))
-        self._chunk = np.empty((self._chunk_samples, ROW_WIDTH))
+        self._chunk = np.empty((max(self._chunk_samples, min(CHUNK_MAX, queue_size)), ROW_WIDTH))
+        self._last_flush_s = 0.0  # wall clock, monotonic
         self._filled = 0
         context = multiprocessing.get_context("spawn")
         self._sent = 0  # samples down the pipe ...
@@ -136,11 +144,15 @@ class OnlineLearner:
         row[ROW_TARGETS] = target_n
         row[ROW_TRACKING] = tracking_m_s
         self._filled += 1
-        if self._filled == self._chunk_samples:
+        if self._filled >= self._chunk_samples and (
+            self._filled == len(self._chunk)
+            or time.monotonic() - self._last_flush_s >= CHUNK_WALL_S
+        ):
             self._flush()
 
     def _flush(self) -> None:
         n, self._filled = self._filled, 0
+        self._last_flush_s = time.monotonic()
         if n == 0:
             return
         if self._sent - self._taken.value + n > self._queue_size or self._final is not None:
