@@ -4,7 +4,7 @@ What the learner costs the control loop is a difference of a few per cent, and a
 machine's own speed moves by more than that from one flight to the next and, within a
 flight, from one second to the next. Two flights, one learning and one not, compare two
 machines. So `groundfx bench online` flies the learner in turns of S simulated seconds:
-working (a sample taken and sent to it every 10 ms, as in any learning flight) and resting
+working (a sample taken for it every 10 ms, as in any learning flight) and resting
 (no sample taken, as in a flight without learning; its process waits on its pipe), and
 keeps each control step's time with the turn it fell in. A working turn and the resting
 turns either side of it ran on the same machine within a fraction of a second.
