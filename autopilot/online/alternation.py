@@ -47,25 +47,8 @@ class Alternation:
 
     def summary(self, controller_s: list[float]) -> dict[str, Any]:
         """The turns, and the control steps' times (`controller_s`, one per counted step) in
-        microseconds, in order and by state."""
-        turns = np.asarray(self.turns, dtype=float).reshape(-1, 4)
-        steps = int(turns[:, 1].sum())
+        microseconds, in order (`groundfx bench online` splits them by turn)."""
         out: dict[str, Any] = {"period_s": self.period_s, "turns": self.turns}
-        if steps != len(controller_s):  # not one time per counted step: no split
-            return out
-        us = np.round(np.asarray(controller_s) * 1e6, 1)
-        working = np.repeat(turns[:, 0] > 0, turns[:, 1].astype(int))
-        for name, mask, rows in (
-            ("working", working, turns[:, 0] > 0),
-            ("resting", ~working, turns[:, 0] == 0),
-        ):
-            chosen = us[mask] if mask.any() else np.zeros(1)
-            out[name] = {
-                "steps": int(mask.sum()),
-                "sim_s": float(turns[rows, 2].sum()),
-                "wall_s": float(turns[rows, 3].sum()),
-                "controller_us_p50": float(np.percentile(chosen, 50)),
-                "controller_us_p99": float(np.percentile(chosen, 99)),
-            }
-        out["controller_us"] = us.tolist()
+        if sum(int(turn[1]) for turn in self.turns) == len(controller_s):  # else: no split
+            out["controller_us"] = np.round(np.asarray(controller_s) * 1e6, 1).tolist()
         return out

@@ -7,17 +7,18 @@ samples). Its own world, so that learning barely changes the trajectory. The hol
 flight.
 
 Within each flight the learner works and rests in turns of `alternate_s` simulated seconds
-(`--online-alternate`, autopilot/online/alternation.py): working, every sample goes to it;
-resting, it is paused and its process waits. Every control step's time is kept with its
-turn. A learner-off flight against a learner-on one compares two flights, and on a shared
-machine two identical flights' p99 differ by tens of per cent; turns a fraction of a second
-of wall time apart run on the same machine. The figures pool the steps of every flight by
-turn: p50 and p99 of the controller's step time, and the real-time factor (simulated over
-wall seconds) in each, and their ratios working over resting, with 95 % intervals from
-resampling the flights. Targets: p99 at most 1.2 times, real-time factor at least 0.8
-times, no sample dropped. `resting_halves_p99_ratio`, the p99 of every other resting turn
-over that of the others, is the same comparison where nothing differs: what a ratio can
-tell on this machine. `composite` flies the basis model (`grounds`).
+(`--online-alternate`, autopilot/online/alternation.py): working, a sample is taken for it
+every 10 ms; resting, none is taken and its process waits. Every control step's time is
+kept with its turn. A learner-off flight against a learner-on one compares two flights,
+and on a shared machine two identical flights' p99 differ by tens of per cent; turns a
+fraction of a second of wall time apart run on the same machine. The figures pool the
+steps of every flight by turn: p50 and p99 of the controller's step time, and the
+real-time factor (simulated over wall seconds) in each, and their ratios working over
+resting, with 95 % intervals from resampling the flights. Targets: p99 at most 1.2 times,
+real-time factor at least 0.8 times, no sample dropped. `resting_halves_p99_ratio`, the
+p99 of every other resting turn over that of the others, is the same comparison where
+nothing differs: what a ratio can tell on this machine. `composite` flies the basis model
+(`grounds`).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import yaml
 from learner.online.names import NEEDS_BASIS
 from mission import EXAMPLES_DIR
 from mission.fly import fly
+from simbridge.config import ConfigError
 
 BENCH_MISSION = EXAMPLES_DIR / "low_hover.yaml"
 DEFAULT_HOLD_S = 120.0
@@ -55,7 +57,7 @@ def split_flight(alternation: dict[str, Any]) -> dict[str, Any]:
     two interleaved halves; simulated and wall seconds of each state."""
     turns = np.asarray(alternation["turns"], dtype=float).reshape(-1, 4)
     if "controller_us" not in alternation:
-        raise ValueError("the flight's summary holds no step times to split by turn")
+        raise ConfigError("a bench flight's summary holds no step times to split by turn")
     us = np.asarray(alternation["controller_us"], dtype=float)
     bounds = np.concatenate([[0], np.cumsum(turns[:, 1]).astype(int)])
     parts: dict[str, list[np.ndarray]] = {"working": [], "resting": [], "even": [], "odd": []}
