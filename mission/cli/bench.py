@@ -238,6 +238,8 @@ def _meets(r: dict[str, Any]) -> bool:
 def _online_line(r: dict[str, Any]) -> str:
     """One method's figures in a few lines."""
 
+    from mission.campaigns.online_bench import P99_TARGET, RTF_TARGET
+
     def ci(key: str) -> str:
         low_high = r.get(f"{key}_ci95")
         return f" [{low_high[0]:.2f}, {low_high[1]:.2f}]" if low_high else ""
@@ -253,6 +255,7 @@ def _online_line(r: dict[str, Any]) -> str:
         f"  real-time factor {r['rtf_working']:.2f} working, {r['rtf_resting']:.2f} resting: "
         f"{r['rtf_ratio']:.2f}x{ci('rtf_ratio')}\n"
         f"  updates {r['online_updates']}, samples dropped {r['online_dropped']}; {verdict} the "
-        f"targets (p99 at most 1.2x, real-time factor at least 0.8x, no sample dropped); load "
+        f"targets (p99 at most {P99_TARGET:g}x, real-time factor at least {RTF_TARGET:g}x, no "
+        f"sample dropped); load "
         f"average {r['load_average'][0]:.2f} before, {r['load_average'][1]:.2f} after"
     )
