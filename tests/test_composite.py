@@ -332,7 +332,7 @@ def test_flights_with_composite_do_no_harm_at_the_training_rho_and_adapt_at_rho2
     from mission.campaigns.online_eval import CONTROLLERS, flight_summary, trial_file, world_file
     from mission.fly import describe
 
-    mission, start = trial_file(tmp_path, 0, 10.0)
+    mission, start = trial_file(tmp_path, 0, 6.0)
     pd = tuple(a for p in CONTROLLERS["thesis"] for a in ("--param", p))
     online = ("--online", "composite")
     flights = {}

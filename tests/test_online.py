@@ -399,10 +399,10 @@ def test_a_protecting_method_adapts_to_rho2_and_forgets_less_than_naive(tmp_path
 
     # the vertical loop as soft as the horizontal one (a0 = 6): its hold wanders over a few
     # millimetres of height to learn from. On the default's stiffer loop (36), which holds
-    # within one, `replay` learnt too little at this scale to beat the offline network near
+    # within one, `replay` learnt too little (10 s hold) to beat the offline network near
     # the ground (77.7 against 75.3 mN; `naive` 51.8)
     soft = ("--param", "GFX_POS_Z_P=6", "--param", "GFX_POS_Z_D=6")
-    mission, start = trial_file(tmp_path, 0, 10.0)
+    mission, start = trial_file(tmp_path, 0, 6.0)
     rho2, rho1 = world_file(tmp_path, 2.0), world_file(tmp_path, 1.0)
     log2 = tmp_path / "offline_rho2.csv"
     hold_error(mission, start, rho2, "neural", 2.0, "rho1", *soft, flight_log=log2)
